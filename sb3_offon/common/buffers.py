@@ -1,0 +1,320 @@
+"""Replay buffers that keep, next to each transition, its Monte-Carlo return and the action taken next."""
+
+from collections.abc import Callable
+from typing import Any, NamedTuple
+
+import numpy as np
+import torch as th
+from gymnasium import spaces
+from scipy.signal import lfilter
+from stable_baselines3.common.buffers import DictReplayBuffer, NStepReplayBuffer, ReplayBuffer
+from stable_baselines3.common.type_aliases import TensorDict
+from stable_baselines3.common.vec_env import VecNormalize
+
+# Maps the (unnormalised) final observations of truncated episodes, batched, to their state values
+# max_a Q_target(s_T, a). Set by OffOnDQN; never pickled with the buffer.
+TruncationValueFn = Callable[[np.ndarray | dict[str, np.ndarray]], np.ndarray]
+
+UNKNOWN_ACTION = -1
+
+
+class OffOnReplayBufferSamples(NamedTuple):
+    """SB3's ``ReplayBufferSamples`` plus the recorded next action (-1: unknown) and Monte-Carlo return (NaN: unknown)."""
+
+    observations: th.Tensor
+    actions: th.Tensor
+    next_observations: th.Tensor
+    dones: th.Tensor
+    rewards: th.Tensor
+    discounts: th.Tensor | None
+    next_actions: th.Tensor
+    mc_returns: th.Tensor
+
+
+class OffOnDictReplayBufferSamples(NamedTuple):
+    """SB3's ``DictReplayBufferSamples`` plus the recorded next action and Monte-Carlo return."""
+
+    observations: TensorDict
+    actions: th.Tensor
+    next_observations: TensorDict
+    dones: th.Tensor
+    rewards: th.Tensor
+    discounts: th.Tensor | None
+    next_actions: th.Tensor
+    mc_returns: th.Tensor
+
+
+def discounted_returns(rewards: np.ndarray, gamma: float, tail_value: float = 0.0) -> np.ndarray:
+    """
+    G_t = r_t + gamma * G_{t+1} for every step of one episode, computed backwards in one vectorised pass.
+
+    :param rewards: the episode's rewards r_0 .. r_{T-1}
+    :param gamma: the discount factor
+    :param tail_value: the value of the state after the last step (0 for a terminated episode)
+    :return: float64 array of G_0 .. G_{T-1}
+    """
+    # lfilter runs y[t] = x[t] + gamma * y[t-1]; on the reversed rewards, with the tail as the first element, that is
+    # the backward recursion. It is exact in float64 for any length, unlike the gamma^-t cumulative-sum trick.
+    reversed_with_tail = np.concatenate(([tail_value], rewards[::-1].astype(np.float64)))
+    return lfilter([1.0], [1.0, -gamma], reversed_with_tail)[:0:-1]
+
+
+class OffOnBufferMixin:
+    """
+    Episode bookkeeping shared by the Off-On replay buffers: the episode buffer Omega of the paper, and next actions.
+
+    While an episode of env ``e`` runs, its rewards are logged (also those that the ring buffer has already
+    overwritten). When it ends, its returns G_t are written into ``mc_returns[:, e]`` at the slots it still holds.
+    ``next_actions[t, e]`` is the action taken at s_{t+1} in the same episode, for the Sarsa target.
+    Overwriting a slot resets both to unknown (NaN, -1).
+
+    Time-limit truncation: the return after the last step is ``truncation_value_fn(final_obs)`` when that is set
+    (OffOnDQN sets it for ``mc_truncation="bootstrap"``), else 0 (``"terminal"``).
+
+    :param gamma: the discount factor of the Monte-Carlo returns (OffOnDQN passes its own)
+    """
+
+    # Attributes of SB3's ReplayBuffer, declared for type checkers
+    buffer_size: int
+    n_envs: int
+    pos: int
+    full: bool
+    optimize_memory_usage: bool
+    observations: Any
+    next_observations: Any
+    device: th.device
+
+    def _init_offon(self, gamma: float) -> None:
+        self.gamma = gamma
+        self.truncation_value_fn: TruncationValueFn | None = None
+        self.mc_returns = np.full((self.buffer_size, self.n_envs), np.nan, dtype=np.float32)
+        self.next_actions = np.full((self.buffer_size, self.n_envs), UNKNOWN_ACTION, dtype=np.int64)
+        self._reset_episodes()
+
+    def _reset_episodes(self) -> None:
+        # Number of add() calls so far: the absolute index of the next transition (its slot is that modulo buffer_size)
+        self._n_adds = 0
+        # Omega: per env, the length of the running episode and its rewards (rows 0..length-1 of a growing log)
+        self.episode_lengths = np.zeros(self.n_envs, dtype=np.int64)
+        self._episode_rewards = np.zeros((1024, self.n_envs), dtype=np.float32)
+
+    def reset(self) -> None:
+        super().reset()  # type: ignore[misc]
+        self.mc_returns.fill(np.nan)
+        self.next_actions.fill(UNKNOWN_ACTION)
+        self._reset_episodes()
+
+    def __getstate__(self) -> dict[str, Any]:
+        # The value function points at the model: pickling it would save the model inside the buffer
+        state = self.__dict__.copy()
+        state["truncation_value_fn"] = None
+        return state
+
+    def add(
+        self,
+        obs: Any,
+        next_obs: Any,
+        action: np.ndarray,
+        reward: np.ndarray,
+        done: np.ndarray,
+        infos: list[dict[str, Any]],
+    ) -> None:
+        action_ids = np.asarray(action).reshape(self.n_envs)
+        running = self.episode_lengths > 0
+        # This action was taken at the next state of each running episode's previous transition
+        self.next_actions[(self.pos - 1) % self.buffer_size, running] = action_ids[running]
+        # The slot about to be overwritten forgets what it knew about its old transition
+        self.mc_returns[self.pos] = np.nan
+        self.next_actions[self.pos] = UNKNOWN_ACTION
+
+        super().add(obs, next_obs, action, reward, done, infos)  # type: ignore[misc]
+
+        self._log_rewards(np.asarray(reward, dtype=np.float32).reshape(self.n_envs))
+        self._n_adds += 1
+        done_envs = np.flatnonzero(np.asarray(done).reshape(self.n_envs))
+        if len(done_envs) > 0:
+            truncated = np.array([bool(infos[env].get("TimeLimit.truncated", False)) for env in done_envs], dtype=bool)
+            tails = np.zeros(len(done_envs))
+            if truncated.any():
+                tails[truncated] = self._state_values(next_obs, done_envs[truncated])
+            for env, tail in zip(done_envs, tails):
+                self._finish_episode(env, tail)
+
+    def _log_rewards(self, reward: np.ndarray) -> None:
+        if self.episode_lengths.max() >= len(self._episode_rewards):
+            grown = np.zeros((2 * len(self._episode_rewards), self.n_envs), dtype=np.float32)
+            grown[: len(self._episode_rewards)] = self._episode_rewards
+            self._episode_rewards = grown
+        self._episode_rewards[self.episode_lengths, np.arange(self.n_envs)] = reward
+        self.episode_lengths += 1
+
+    def _state_values(self, observations: Any, env_indices: np.ndarray) -> np.ndarray:
+        """Bootstrap values of the given envs' final observations (taken from a batch of all envs' observations)."""
+        if self.truncation_value_fn is None:
+            return np.zeros(len(env_indices))
+        if isinstance(observations, dict):
+            selected = {key: np.asarray(value)[env_indices] for key, value in observations.items()}
+        else:
+            selected = np.asarray(observations)[env_indices]
+        return np.asarray(self.truncation_value_fn(selected), dtype=np.float64).reshape(len(env_indices))
+
+    def _finish_episode(self, env: int, tail_value: float) -> None:
+        """Write the returns of env's episode, which ended with the latest add(), into the slots it still holds."""
+        length = int(self.episode_lengths[env])
+        returns = discounted_returns(self._episode_rewards[:length, env], self.gamma, tail_value)
+        kept = min(length, self.buffer_size)
+        slots = np.arange(self._n_adds - kept, self._n_adds) % self.buffer_size
+        self.mc_returns[slots, env] = returns[length - kept :]
+        self.episode_lengths[env] = 0
+
+    def end_open_episodes(self) -> None:
+        """
+        End every running episode as truncated at its last stored next observation.
+
+        Called when the env is reset outside an episode end (a new ``learn()`` call), so that an episode that was cut
+        off gets its returns, bootstrapped as any time-limit truncation, and does not chain into the next one.
+        """
+        running = np.flatnonzero(self.episode_lengths > 0)
+        if len(running) == 0:
+            return
+        last_slot = (self._n_adds - 1) % self.buffer_size
+        tails = self._state_values(self._stored_next_observations(last_slot), running)
+        for env, tail in zip(running, tails):
+            self._finish_episode(env, tail)
+
+    def _stored_next_observations(self, slot: int) -> Any:
+        if self.optimize_memory_usage:
+            return self.observations[(slot + 1) % self.buffer_size]
+        if isinstance(self.next_observations, dict):
+            return {key: value[slot] for key, value in self.next_observations.items()}
+        return self.next_observations[slot]
+
+    def _get_samples(self, batch_inds: np.ndarray, env: VecNormalize | None = None) -> Any:
+        # SB3 draws each sample's env index inside _get_samples and does not return it. Replaying that one draw from
+        # the same global RNG state recovers the indices, so SB3's sampling code is reused as it is and the global RNG
+        # ends where plain SB3 would leave it (which the bit-identity with DQN relies on).
+        rng_state = np.random.get_state()
+        samples = super()._get_samples(batch_inds, env)  # type: ignore[misc]
+        state_after = np.random.get_state()
+        np.random.set_state(rng_state)
+        env_indices = np.random.randint(0, high=self.n_envs, size=(len(batch_inds),))
+        np.random.set_state(state_after)
+
+        sample_class = OffOnDictReplayBufferSamples if isinstance(samples.observations, dict) else OffOnReplayBufferSamples
+        return sample_class(
+            *samples,
+            next_actions=self.to_torch(self._sarsa_next_actions(batch_inds, env_indices).reshape(-1, 1)),  # type: ignore[attr-defined]
+            mc_returns=self.to_torch(self.mc_returns[batch_inds, env_indices].reshape(-1, 1)),  # type: ignore[attr-defined]
+        )
+
+    def _sarsa_next_actions(self, batch_inds: np.ndarray, env_indices: np.ndarray) -> np.ndarray:
+        """The action taken at the state that each sample's TD target bootstraps from (-1 where unknown)."""
+        n_steps = getattr(self, "n_steps", 1)
+        if n_steps == 1:
+            return self.next_actions[batch_inds, env_indices]
+        # n-step: the action at s_{t+n}. It is known only if the episode went on for all n steps, i.e. every step of
+        # the window has a recorded next action (an episode end or the newest step has none, which also cuts the
+        # n-step return short, so the target then falls back to Q-learning).
+        window = (batch_inds[:, None] + np.arange(n_steps)) % self.buffer_size
+        chain = self.next_actions[window, env_indices[:, None]]
+        return np.where((chain[:, :-1] >= 0).all(axis=1), chain[:, -1], UNKNOWN_ACTION)
+
+
+class OffOnReplayBuffer(OffOnBufferMixin, ReplayBuffer):
+    """
+    SB3's ``ReplayBuffer`` that also records each transition's Monte-Carlo return and next action.
+
+    :param buffer_size: Max number of element in the buffer
+    :param observation_space: Observation space
+    :param action_space: Action space (Discrete)
+    :param device: PyTorch device
+    :param n_envs: Number of parallel environments
+    :param optimize_memory_usage: Enable a memory efficient variant of the replay buffer
+    :param handle_timeout_termination: Handle timeout termination (due to timelimit) separately
+    :param gamma: Discount factor of the Monte-Carlo returns
+    """
+
+    def __init__(
+        self,
+        buffer_size: int,
+        observation_space: spaces.Space,
+        action_space: spaces.Space,
+        device: th.device | str = "auto",
+        n_envs: int = 1,
+        optimize_memory_usage: bool = False,
+        handle_timeout_termination: bool = True,
+        gamma: float = 0.99,
+    ):
+        super().__init__(buffer_size, observation_space, action_space, device, n_envs, optimize_memory_usage, handle_timeout_termination)
+        self._init_offon(gamma)
+
+
+class OffOnNStepReplayBuffer(OffOnBufferMixin, NStepReplayBuffer):
+    """
+    SB3's ``NStepReplayBuffer`` that also records Monte-Carlo returns and next actions.
+    The Sarsa target uses the action taken at the n-th next state.
+
+    :param buffer_size: Max number of element in the buffer
+    :param observation_space: Observation space
+    :param action_space: Action space (Discrete)
+    :param device: PyTorch device
+    :param n_envs: Number of parallel environments
+    :param optimize_memory_usage: Not supported
+    :param handle_timeout_termination: Handle timeout termination (due to timelimit) separately
+    :param n_steps: Number of steps to accumulate rewards for n-step returns
+    :param gamma: Discount factor of the n-step and Monte-Carlo returns
+    """
+
+    def __init__(
+        self,
+        buffer_size: int,
+        observation_space: spaces.Space,
+        action_space: spaces.Space,
+        device: th.device | str = "auto",
+        n_envs: int = 1,
+        optimize_memory_usage: bool = False,
+        handle_timeout_termination: bool = True,
+        n_steps: int = 3,
+        gamma: float = 0.99,
+    ):
+        super().__init__(
+            buffer_size,
+            observation_space,
+            action_space,
+            device,
+            n_envs,
+            optimize_memory_usage,
+            handle_timeout_termination,
+            n_steps=n_steps,
+            gamma=gamma,
+        )
+        self._init_offon(gamma)
+
+
+class OffOnDictReplayBuffer(OffOnBufferMixin, DictReplayBuffer):
+    """
+    SB3's ``DictReplayBuffer`` (Dict observations) that also records Monte-Carlo returns and next actions.
+
+    :param buffer_size: Max number of element in the buffer
+    :param observation_space: Observation space (Dict)
+    :param action_space: Action space (Discrete)
+    :param device: PyTorch device
+    :param n_envs: Number of parallel environments
+    :param optimize_memory_usage: Not supported by SB3's DictReplayBuffer
+    :param handle_timeout_termination: Handle timeout termination (due to timelimit) separately
+    :param gamma: Discount factor of the Monte-Carlo returns
+    """
+
+    def __init__(
+        self,
+        buffer_size: int,
+        observation_space: spaces.Dict,
+        action_space: spaces.Space,
+        device: th.device | str = "auto",
+        n_envs: int = 1,
+        optimize_memory_usage: bool = False,
+        handle_timeout_termination: bool = True,
+        gamma: float = 0.99,
+    ):
+        super().__init__(buffer_size, observation_space, action_space, device, n_envs, optimize_memory_usage, handle_timeout_termination)
+        self._init_offon(gamma)

@@ -1,0 +1,421 @@
+import warnings
+from typing import Any, ClassVar, TypeVar
+
+import numpy as np
+import torch as th
+from gymnasium import spaces
+from stable_baselines3.common.buffers import ReplayBuffer
+from stable_baselines3.common.policies import BasePolicy
+from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
+from stable_baselines3.common.utils import LinearSchedule
+from stable_baselines3.dqn import DQN
+from stable_baselines3.dqn.policies import DQNPolicy
+from torch.nn import functional as F
+
+from sb3_offon.common.buffers import (
+    OffOnBufferMixin,
+    OffOnDictReplayBuffer,
+    OffOnNStepReplayBuffer,
+    OffOnReplayBuffer,
+    OffOnReplayBufferSamples,
+)
+from sb3_offon.offon_dqn.policies import CnnPolicy, MlpPolicy, MultiInputPolicy
+
+SelfOffOnDQN = TypeVar("SelfOffOnDQN", bound="OffOnDQN")
+
+MC_MIXING_OPTIONS = ("sample", "convex")
+SARSA_TARGET_OPTIONS = ("sampled", "expected")
+MC_TRUNCATION_OPTIONS = ("bootstrap", "terminal")
+LOSS_FUNCTIONS = {"huber": F.smooth_l1_loss, "mse": F.mse_loss}
+
+
+class OffOnDQN(DQN):
+    """
+    Offline-Online DQN: a DQN whose regression target is drawn, per sample, among the offline Monte-Carlo return
+    of the finished episode, the Q-learning target and the Sarsa target.
+
+    Paper: Kim, "Deep Reinforcement Learning by Balancing Offline Monte Carlo and Online Temporal Difference Use
+    Based on Environment Experiences", Symmetry 12(10):1685, 2020. https://doi.org/10.3390/sym12101685
+
+    With probability delta1 (``mc_*``), and when the return G_t of the transition's episode is known, the target is
+    G_t. Otherwise it is a TD target: Q-learning, y = r + gamma * (1 - d) * max_a Q_target(s', a), with probability
+    delta2 (``qlearning_*``), else Sarsa. Both probabilities decay linearly like the exploration rate.
+
+    Where the paper is loose, this implementation reads it as follows (and keeps the paper's choice as an option):
+
+    - The paper's pseudo-code swaps "online" and "offline" and decays delta1 per episode; here both schedules move
+      with training progress (env steps), as SB3's exploration rate does.
+    - The Monte-Carlo return is the discounted return G_t = r_t + gamma * G_{t+1}, computed once when the episode
+      ends and stored next to the transitions in the replay buffer (the paper's episode buffer Omega).
+    - An episode cut by a time limit is not terminal: by default its return is bootstrapped from the target network
+      at the final observation (``mc_truncation="bootstrap"``); ``"terminal"`` is what the paper's code base did.
+    - Sarsa bootstraps from the action actually taken at s' (recorded in the buffer; ``sarsa_target="sampled"``), or
+      from the expectation under the current epsilon-greedy policy (``"expected"``).
+    - The paper uses a squared error; SB3's DQN uses the Huber loss, which is the default here (``loss="mse"`` for
+      the paper's).
+
+    :param policy: The policy model to use (MlpPolicy, CnnPolicy, ...)
+    :param env: The environment to learn from (if registered in Gym, can be str)
+    :param learning_rate: The learning rate, it can be a function of the current progress remaining (from 1 to 0)
+    :param buffer_size: size of the replay buffer
+    :param learning_starts: how many steps of the model to collect transitions for before learning starts
+    :param batch_size: Minibatch size for each gradient update
+    :param tau: the soft update coefficient ("Polyak update", between 0 and 1) default 1 for hard update
+    :param gamma: the discount factor (also of the Monte-Carlo returns)
+    :param train_freq: Update the model every ``train_freq`` steps. Alternatively pass a tuple of frequency and unit
+        like ``(5, "step")`` or ``(2, "episode")``.
+    :param gradient_steps: How many gradient steps to do after each rollout (see ``train_freq``).
+        Set to ``-1`` means to do as many gradient steps as steps done in the environment during the rollout.
+    :param replay_buffer_class: Replay buffer class to use. If ``None``, an Off-On buffer matching the observation
+        space and ``n_steps`` is selected. A buffer that is not an ``OffOnBufferMixin`` (``HerReplayBuffer``, say)
+        records no returns nor next actions: training then uses Q-learning targets only (with a warning).
+    :param replay_buffer_kwargs: Keyword arguments to pass to the replay buffer on creation.
+    :param optimize_memory_usage: Enable a memory efficient variant of the replay buffer at a cost of more complexity.
+    :param n_steps: When n_step > 1, uses n-step returns for the TD targets; Sarsa then uses the action taken at the
+        n-th next state. Monte-Carlo returns are unaffected.
+    :param target_update_interval: update the target network every ``target_update_interval`` environment steps.
+    :param exploration_fraction: fraction of entire training period over which the exploration rate is reduced
+    :param exploration_initial_eps: initial value of random action probability
+    :param exploration_final_eps: final value of random action probability
+    :param max_grad_norm: The maximum value for the gradient clipping
+    :param mc_initial_prob: initial delta1, the probability of the Monte-Carlo target (where the return is known)
+    :param mc_final_prob: final delta1
+    :param mc_fraction: fraction of the training period over which delta1 goes from initial to final
+    :param qlearning_initial_prob: initial delta2, the probability of the Q-learning target given a TD target
+        (Sarsa otherwise)
+    :param qlearning_final_prob: final delta2
+    :param qlearning_fraction: fraction of the training period over which delta2 goes from initial to final
+    :param mc_mixing: ``"sample"`` draws the Monte-Carlo target with probability delta1 (the paper);
+        ``"convex"`` uses y = delta1 * G + (1 - delta1) * y_TD where G is known (mixed Monte-Carlo,
+        Ostrovski et al. 2017; Hausknecht & Stone 2016)
+    :param sarsa_target: ``"sampled"`` bootstraps from the recorded next action (Q-learning where it is unknown);
+        ``"expected"`` from the expectation under the current epsilon-greedy policy (Expected Sarsa)
+    :param mc_truncation: return after a time-limit truncation: ``"bootstrap"``, gamma * max_a Q_target(s_T, a)
+        computed with the target network when the episode ends; ``"terminal"``, 0
+    :param loss: ``"huber"`` (SB3's DQN) or ``"mse"`` (the paper)
+    :param stats_window_size: Window size for the rollout logging, specifying the number of episodes to average
+        the reported success rate, mean episode length, and mean reward over
+    :param tensorboard_log: the log location for tensorboard (if None, no logging)
+    :param policy_kwargs: additional arguments to be passed to the policy on creation
+    :param verbose: Verbosity level: 0 for no output, 1 for info messages (such as device or wrappers used), 2 for
+        debug messages
+    :param seed: Seed for the pseudo random generators, including the generator of the target draws
+    :param device: Device (cpu, cuda, ...) on which the code should be run.
+        Setting it to auto, the code will be run on the GPU if possible.
+    :param _init_setup_model: Whether or not to build the network at the creation of the instance
+    """
+
+    policy_aliases: ClassVar[dict[str, type[BasePolicy]]] = {
+        "MlpPolicy": MlpPolicy,
+        "CnnPolicy": CnnPolicy,
+        "MultiInputPolicy": MultiInputPolicy,
+    }
+    mc_schedule: Schedule
+    qlearning_schedule: Schedule
+
+    def __init__(
+        self,
+        policy: str | type[DQNPolicy],
+        env: GymEnv | str,
+        learning_rate: float | Schedule = 1e-4,
+        buffer_size: int = 1_000_000,
+        learning_starts: int = 100,
+        batch_size: int = 32,
+        tau: float = 1.0,
+        gamma: float = 0.99,
+        train_freq: int | tuple[int, str] = 4,
+        gradient_steps: int = 1,
+        replay_buffer_class: type[ReplayBuffer] | None = None,
+        replay_buffer_kwargs: dict[str, Any] | None = None,
+        optimize_memory_usage: bool = False,
+        n_steps: int = 1,
+        target_update_interval: int = 10000,
+        exploration_fraction: float = 0.1,
+        exploration_initial_eps: float = 1.0,
+        exploration_final_eps: float = 0.05,
+        max_grad_norm: float = 10,
+        mc_initial_prob: float = 0.99,
+        mc_final_prob: float = 0.01,
+        mc_fraction: float = 1.0,
+        qlearning_initial_prob: float = 0.99,
+        qlearning_final_prob: float = 0.01,
+        qlearning_fraction: float = 1.0,
+        mc_mixing: str = "sample",
+        sarsa_target: str = "sampled",
+        mc_truncation: str = "bootstrap",
+        loss: str = "huber",
+        stats_window_size: int = 100,
+        tensorboard_log: str | None = None,
+        policy_kwargs: dict[str, Any] | None = None,
+        verbose: int = 0,
+        seed: int | None = None,
+        device: th.device | str = "auto",
+        _init_setup_model: bool = True,
+    ) -> None:
+        super().__init__(
+            policy,
+            env,
+            learning_rate=learning_rate,
+            buffer_size=buffer_size,
+            learning_starts=learning_starts,
+            batch_size=batch_size,
+            tau=tau,
+            gamma=gamma,
+            train_freq=train_freq,
+            gradient_steps=gradient_steps,
+            replay_buffer_class=replay_buffer_class,
+            replay_buffer_kwargs=replay_buffer_kwargs,
+            optimize_memory_usage=optimize_memory_usage,
+            n_steps=n_steps,
+            target_update_interval=target_update_interval,
+            exploration_fraction=exploration_fraction,
+            exploration_initial_eps=exploration_initial_eps,
+            exploration_final_eps=exploration_final_eps,
+            max_grad_norm=max_grad_norm,
+            stats_window_size=stats_window_size,
+            tensorboard_log=tensorboard_log,
+            policy_kwargs=policy_kwargs,
+            verbose=verbose,
+            seed=seed,
+            device=device,
+            _init_setup_model=False,
+        )
+        self.mc_initial_prob = mc_initial_prob
+        self.mc_final_prob = mc_final_prob
+        self.mc_fraction = mc_fraction
+        self.qlearning_initial_prob = qlearning_initial_prob
+        self.qlearning_final_prob = qlearning_final_prob
+        self.qlearning_fraction = qlearning_fraction
+        self.mc_mixing = mc_mixing
+        self.sarsa_target = sarsa_target
+        self.mc_truncation = mc_truncation
+        self.loss = loss
+        self._check_offon_arguments()
+        # The target draws have a generator of their own: they never move the global RNGs that SB3 uses for
+        # exploration and sampling, and its state is saved with the model, so a resumed run draws on.
+        self.target_rng = np.random.default_rng(seed)
+        # Current delta1 and delta2, updated at each training call (like ``exploration_rate``)
+        self.mc_prob = mc_initial_prob
+        self.qlearning_prob = qlearning_initial_prob
+        if _init_setup_model:
+            self._setup_model()
+
+    def _check_offon_arguments(self) -> None:
+        for name in ("mc_initial_prob", "mc_final_prob", "qlearning_initial_prob", "qlearning_final_prob"):
+            value = getattr(self, name)
+            if not 0.0 <= value <= 1.0:
+                raise ValueError(f"`{name}` must be a probability in [0, 1], got {value!r}")
+        for name in ("mc_fraction", "qlearning_fraction"):
+            value = getattr(self, name)
+            if not 0.0 < value <= 1.0:
+                raise ValueError(f"`{name}` must be in (0, 1], got {value!r}")
+        for name, options in (
+            ("mc_mixing", MC_MIXING_OPTIONS),
+            ("sarsa_target", SARSA_TARGET_OPTIONS),
+            ("mc_truncation", MC_TRUNCATION_OPTIONS),
+            ("loss", tuple(LOSS_FUNCTIONS)),
+        ):
+            value = getattr(self, name)
+            if value not in options:
+                raise ValueError(f"`{name}` must be one of {options}, got {value!r}")
+
+    def _setup_model(self) -> None:
+        picks_buffer = self.replay_buffer_class is None
+        if picks_buffer:
+            if isinstance(self.observation_space, spaces.Dict):
+                if self.n_steps > 1:
+                    raise ValueError("`n_steps` > 1 is not supported for Dict observation spaces (as in SB3's DQN)")
+                self.replay_buffer_class = OffOnDictReplayBuffer
+            elif self.n_steps > 1:
+                self.replay_buffer_class = OffOnNStepReplayBuffer
+                self.replay_buffer_kwargs.update({"n_steps": self.n_steps})
+            else:
+                self.replay_buffer_class = OffOnReplayBuffer
+        if issubclass(self.replay_buffer_class, OffOnBufferMixin):  # type: ignore[arg-type]
+            self.replay_buffer_kwargs.setdefault("gamma", self.gamma)
+
+        with warnings.catch_warnings():
+            if picks_buffer or issubclass(self.replay_buffer_class, OffOnNStepReplayBuffer):  # type: ignore[arg-type]
+                # We picked the buffer (or built it at the first setup), with n_steps passed on: SB3's warning that
+                # n_steps is ignored for a custom replay_buffer_class does not apply.
+                warnings.filterwarnings("ignore", message="`n_steps=.*is ignored")
+            super()._setup_model()
+
+        self.mc_schedule = LinearSchedule(self.mc_initial_prob, self.mc_final_prob, self.mc_fraction)
+        self.qlearning_schedule = LinearSchedule(self.qlearning_initial_prob, self.qlearning_final_prob, self.qlearning_fraction)
+        self._connect_replay_buffer()
+
+    def _connect_replay_buffer(self) -> None:
+        if isinstance(self.replay_buffer, OffOnBufferMixin):
+            bootstraps = self.mc_truncation == "bootstrap"
+            self.replay_buffer.truncation_value_fn = self._target_state_values if bootstraps else None
+        elif not getattr(self, "_warned_plain_buffer", False):
+            self._warned_plain_buffer = True
+            warnings.warn(
+                f"OffOnDQN: {type(self.replay_buffer).__name__} records no Monte-Carlo returns nor next actions; "
+                "training uses Q-learning targets only (plain DQN). Use an OffOnReplayBuffer for the Off-On targets."
+            )
+
+    def load_replay_buffer(self, path: Any, truncate_last_traj: bool = True) -> None:
+        super().load_replay_buffer(path, truncate_last_traj)
+        self._connect_replay_buffer()
+
+    def _target_state_values(self, observations: np.ndarray | dict[str, np.ndarray]) -> np.ndarray:
+        """max_a Q_target(s, a) of a batch of unnormalised observations (the bootstrap of truncated episodes)."""
+        if self._vec_normalize_env is not None:
+            observations = self._vec_normalize_env.normalize_obs(observations)
+        obs_tensor, _ = self.policy.obs_to_tensor(observations)
+        with th.no_grad():
+            return self.q_net_target(obs_tensor).max(dim=1).values.cpu().numpy()
+
+    def _setup_learn(
+        self,
+        total_timesteps: int,
+        callback: MaybeCallback = None,
+        reset_num_timesteps: bool = True,
+        tb_log_name: str = "run",
+        progress_bar: bool = False,
+    ) -> Any:
+        env_resets = reset_num_timesteps or self._last_obs is None
+        result = super()._setup_learn(total_timesteps, callback, reset_num_timesteps, tb_log_name, progress_bar)
+        if env_resets and isinstance(self.replay_buffer, OffOnBufferMixin):
+            # Episodes still running in the buffer were cut off by this reset
+            self.replay_buffer.end_open_episodes()
+        return result
+
+    def train(self, gradient_steps: int, batch_size: int = 100) -> None:
+        self.mc_prob = self.mc_schedule(self._current_progress_remaining)
+        self.qlearning_prob = self.qlearning_schedule(self._current_progress_remaining)
+        self.logger.record("train/mc_prob", self.mc_prob)
+        self.logger.record("train/qlearning_prob", self.qlearning_prob)
+        if not isinstance(self.replay_buffer, OffOnBufferMixin):
+            super().train(gradient_steps, batch_size)
+            return
+
+        self.policy.set_training_mode(True)
+        self._update_learning_rate(self.policy.optimizer)
+        loss_fn = LOSS_FUNCTIONS[self.loss]
+        # All of this call's target draws at once: uniforms for the MC choice and for the Q-learning/Sarsa choice
+        uniforms = th.as_tensor(self.target_rng.random((2, gradient_steps, batch_size, 1), dtype=np.float32), device=self.device)
+        losses, q_taken, mc_returns, mc_chosen, sarsa_chosen = [], [], [], [], []
+        for step in range(gradient_steps):
+            replay_data: OffOnReplayBufferSamples = self.replay_buffer.sample(batch_size, env=self._vec_normalize_env)  # type: ignore[assignment]
+            with th.no_grad():
+                target_q_values, use_mc, use_sarsa = self._targets(replay_data, uniforms[0, step], uniforms[1, step])
+
+            current_q_values = self.q_net(replay_data.observations)
+            current_q_values = th.gather(current_q_values, dim=1, index=replay_data.actions.long())
+            loss = loss_fn(current_q_values, target_q_values)
+
+            self.policy.optimizer.zero_grad()
+            loss.backward()
+            th.nn.utils.clip_grad_norm_(self.policy.parameters(), self.max_grad_norm)
+            self.policy.optimizer.step()
+
+            # Statistics stay on the device and are read once per call: a read per step would sync every step
+            losses.append(loss.detach())
+            q_taken.append(current_q_values.detach())
+            mc_returns.append(replay_data.mc_returns)
+            mc_chosen.append(use_mc)
+            sarsa_chosen.append(use_sarsa)
+
+        self._n_updates += gradient_steps
+        self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
+        self._record_target_statistics(losses, q_taken, mc_returns, mc_chosen, sarsa_chosen)
+
+    def _targets(
+        self, replay_data: OffOnReplayBufferSamples, mc_uniform: th.Tensor, qlearning_uniform: th.Tensor
+    ) -> tuple[th.Tensor, th.Tensor | None, th.Tensor | None]:
+        """
+        The regression targets of one minibatch.
+
+        :return: the targets, and the masks of samples whose target is Monte-Carlo and Sarsa (None: no such sample)
+        """
+        # For n-step replay, discount factor is gamma**n_steps (when no early termination)
+        discounts = replay_data.discounts if replay_data.discounts is not None else self.gamma
+        next_q_values_all = self.q_net_target(replay_data.next_observations)
+        next_q_values, _ = next_q_values_all.max(dim=1)
+        next_q_values = next_q_values.reshape(-1, 1)
+
+        use_sarsa = None
+        if self.qlearning_prob < 1.0:
+            sarsa_values, use_sarsa = self._sarsa_next_values(replay_data, next_q_values_all)
+            if self.qlearning_prob > 0.0:
+                use_sarsa = use_sarsa & (qlearning_uniform >= self.qlearning_prob)
+            next_q_values = th.where(use_sarsa, sarsa_values, next_q_values)
+        # Written as in SB3's DQN: with Q-learning only, the targets are bit-identical
+        target_q_values = replay_data.rewards + (1 - replay_data.dones) * discounts * next_q_values
+
+        use_mc = None
+        if self.mc_prob > 0.0:
+            known = ~th.isnan(replay_data.mc_returns)
+            if self.mc_mixing == "convex":
+                mixed = self.mc_prob * replay_data.mc_returns + (1.0 - self.mc_prob) * target_q_values
+                target_q_values = th.where(known, mixed, target_q_values)
+                use_mc = known
+            else:
+                use_mc = known & (mc_uniform < self.mc_prob) if self.mc_prob < 1.0 else known
+                target_q_values = th.where(use_mc, replay_data.mc_returns, target_q_values)
+                if use_sarsa is not None:
+                    # For the statistics: a Sarsa target replaced by the Monte-Carlo one was not used
+                    use_sarsa = use_sarsa & ~use_mc
+        return target_q_values, use_mc, use_sarsa
+
+    def _sarsa_next_values(
+        self, replay_data: OffOnReplayBufferSamples, next_q_values_all: th.Tensor
+    ) -> tuple[th.Tensor, th.Tensor]:
+        """Q_target(s', a') for Sarsa, and where that value exists (the next action is known)."""
+        if self.sarsa_target == "expected":
+            # Expectation under the behaviour policy: epsilon-greedy on the online network
+            greedy_actions = self.q_net(replay_data.next_observations).argmax(dim=1, keepdim=True)
+            greedy_values = th.gather(next_q_values_all, dim=1, index=greedy_actions)
+            expected = self.exploration_rate * next_q_values_all.mean(dim=1, keepdim=True)
+            expected = expected + (1.0 - self.exploration_rate) * greedy_values
+            return expected, th.ones_like(greedy_values, dtype=th.bool)
+        next_actions = replay_data.next_actions
+        known = next_actions >= 0
+        sampled = th.gather(next_q_values_all, dim=1, index=next_actions.clamp(min=0))
+        return sampled, known
+
+    def _record_target_statistics(
+        self,
+        losses: list[th.Tensor],
+        q_taken: list[th.Tensor],
+        mc_returns: list[th.Tensor],
+        mc_chosen: list[th.Tensor | None],
+        sarsa_chosen: list[th.Tensor | None],
+    ) -> None:
+        n_targets = sum(len(q) for q in q_taken)
+        self.logger.record("train/loss", th.stack(losses).mean().item())
+        for key, chosen in (("train/mc_target_fraction", mc_chosen), ("train/sarsa_target_fraction", sarsa_chosen)):
+            used = [mask for mask in chosen if mask is not None]
+            count = th.stack([mask.sum() for mask in used]).sum().item() if used else 0
+            self.logger.record(key, count / n_targets)
+        returns = th.cat(mc_returns)
+        known = ~th.isnan(returns)
+        n_known = int(known.sum().item())
+        if n_known > 0:
+            gap = (th.cat(q_taken) - th.nan_to_num(returns)) * known
+            self.logger.record("train/q_mc_gap", gap.sum().item() / n_known)
+
+    def learn(
+        self: SelfOffOnDQN,
+        total_timesteps: int,
+        callback: MaybeCallback = None,
+        log_interval: int = 4,
+        tb_log_name: str = "OffOnDQN",
+        reset_num_timesteps: bool = True,
+        progress_bar: bool = False,
+    ) -> SelfOffOnDQN:
+        return super().learn(
+            total_timesteps=total_timesteps,
+            callback=callback,
+            log_interval=log_interval,
+            tb_log_name=tb_log_name,
+            reset_num_timesteps=reset_num_timesteps,
+            progress_bar=progress_bar,
+        )
+
+    def _excluded_save_params(self) -> list[str]:
+        # The schedules are rebuilt from their parameters in _setup_model
+        return [*super()._excluded_save_params(), "mc_schedule", "qlearning_schedule"]
