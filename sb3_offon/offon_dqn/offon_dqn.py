@@ -180,6 +180,8 @@ class OffOnDQN(DQN):
             device=device,
             _init_setup_model=False,
         )
+        # Our buffers take gamma from here: work on a copy, so that the caller's dict is left as it was
+        self.replay_buffer_kwargs = dict(self.replay_buffer_kwargs)
         self.mc_initial_prob = mc_initial_prob
         self.mc_final_prob = mc_final_prob
         self.mc_fraction = mc_fraction

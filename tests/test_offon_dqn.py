@@ -1,0 +1,393 @@
+"""OffOnDQN: target choice, schedules, bit-identity with DQN, save/load, observation types, bad input, logging."""
+
+import pickle
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch as th
+from stable_baselines3 import DQN
+from stable_baselines3.common.buffers import ReplayBuffer
+from stable_baselines3.common.envs import FakeImageEnv, SimpleMultiObsEnv
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.logger import KVWriter, Logger
+from stable_baselines3.common.monitor import Monitor
+from stable_baselines3.common.vec_env import DummyVecEnv
+
+from sb3_offon import OffOnDictReplayBuffer, OffOnDQN, OffOnNStepReplayBuffer, OffOnReplayBuffer
+from sb3_offon.common.buffers import OffOnReplayBufferSamples, discounted_returns
+
+SMALL = dict(learning_starts=100, buffer_size=2000, batch_size=32, train_freq=4, target_update_interval=100,
+             policy_kwargs=dict(net_arch=[16]), device="cpu")
+Q_ONLY = dict(mc_initial_prob=0.0, mc_final_prob=0.0, qlearning_initial_prob=1.0, qlearning_final_prob=1.0)
+
+
+def constant_probs(mc: float, qlearning: float) -> dict:
+    return dict(mc_initial_prob=mc, mc_final_prob=mc, qlearning_initial_prob=qlearning, qlearning_final_prob=qlearning)
+
+
+# --- targets -----------------------------------------------------------------------------------------------------
+
+
+def crafted_batch(model: OffOnDQN, batch_size: int = 400) -> OffOnReplayBufferSamples:
+    """A minibatch with every case: known/unknown returns, known/unknown next actions, terminal or not."""
+    gen = th.Generator().manual_seed(0)
+    obs_dim = model.observation_space.shape[0]
+    n_actions = int(model.action_space.n)
+    mc_returns = th.rand(batch_size, 1, generator=gen) * 50
+    mc_returns[::3] = float("nan")
+    next_actions = th.randint(0, n_actions, (batch_size, 1), generator=gen)
+    next_actions[1::4] = -1
+    dones = (th.rand(batch_size, 1, generator=gen) < 0.2).float()
+    return OffOnReplayBufferSamples(
+        observations=th.randn(batch_size, obs_dim, generator=gen),
+        actions=th.randint(0, n_actions, (batch_size, 1), generator=gen),
+        next_observations=th.randn(batch_size, obs_dim, generator=gen),
+        dones=dones,
+        rewards=th.randn(batch_size, 1, generator=gen),
+        discounts=None,
+        next_actions=next_actions,
+        mc_returns=mc_returns,
+    )
+
+
+def reference_targets(model: OffOnDQN, data: OffOnReplayBufferSamples):
+    """Each kind of target, computed the plain way."""
+    with th.no_grad():
+        next_q = model.q_net_target(data.next_observations)
+        not_done = 1 - data.dones
+        qlearning = data.rewards + not_done * model.gamma * next_q.max(dim=1, keepdim=True).values
+        sarsa_next = next_q.gather(1, data.next_actions.clamp(min=0))
+        sarsa = th.where(data.next_actions >= 0, data.rewards + not_done * model.gamma * sarsa_next, qlearning)
+        greedy = model.q_net(data.next_observations).argmax(dim=1, keepdim=True)
+        eps = model.exploration_rate
+        expected_next = eps * next_q.mean(dim=1, keepdim=True) + (1 - eps) * next_q.gather(1, greedy)
+        expected = data.rewards + not_done * model.gamma * expected_next
+    return qlearning, sarsa, expected
+
+
+def targets_at(model: OffOnDQN, data, mc: float, qlearning: float, seed: int = 0):
+    model.mc_prob, model.qlearning_prob = mc, qlearning
+    gen = th.Generator().manual_seed(seed)
+    uniforms = th.rand(2, len(data.rewards), 1, generator=gen)
+    with th.no_grad():
+        return model._targets(data, uniforms[0], uniforms[1])
+
+
+@pytest.fixture(scope="module")
+def model():
+    return OffOnDQN("MlpPolicy", "CartPole-v1", seed=0, **SMALL)
+
+
+def test_qlearning_target_at_mc_0_qlearning_1(model):
+    data = crafted_batch(model)
+    qlearning, _, _ = reference_targets(model, data)
+    targets, use_mc, use_sarsa = targets_at(model, data, mc=0.0, qlearning=1.0)
+    th.testing.assert_close(targets, qlearning)
+    assert use_mc is None and use_sarsa is None
+
+
+def test_mc_target_at_mc_1_where_the_return_is_known(model):
+    data = crafted_batch(model)
+    qlearning, _, _ = reference_targets(model, data)
+    targets, use_mc, _ = targets_at(model, data, mc=1.0, qlearning=1.0)
+    known = ~th.isnan(data.mc_returns)
+    th.testing.assert_close(targets[known], data.mc_returns[known])
+    th.testing.assert_close(targets[~known], qlearning[~known])
+    assert th.equal(use_mc, known)
+
+
+def test_sampled_sarsa_target_at_qlearning_0(model):
+    data = crafted_batch(model)
+    _, sarsa, _ = reference_targets(model, data)
+    targets, _, use_sarsa = targets_at(model, data, mc=0.0, qlearning=0.0)
+    th.testing.assert_close(targets, sarsa)
+    assert th.equal(use_sarsa, data.next_actions >= 0), "unknown next actions fall back to Q-learning"
+
+
+def test_expected_sarsa_target_at_qlearning_0(model):
+    data = crafted_batch(model)
+    model.exploration_rate = 0.3
+    _, _, expected = reference_targets(model, data)
+    model.sarsa_target = "expected"
+    try:
+        targets, _, use_sarsa = targets_at(model, data, mc=0.0, qlearning=0.0)
+    finally:
+        model.sarsa_target = "sampled"
+    th.testing.assert_close(targets, expected)
+    assert bool(use_sarsa.all())
+
+
+def test_convex_mixing(model):
+    data = crafted_batch(model)
+    qlearning, _, _ = reference_targets(model, data)
+    model.mc_mixing = "convex"
+    try:
+        targets, _, _ = targets_at(model, data, mc=0.25, qlearning=1.0)
+    finally:
+        model.mc_mixing = "sample"
+    known = ~th.isnan(data.mc_returns)
+    th.testing.assert_close(targets[known], 0.25 * data.mc_returns[known] + 0.75 * qlearning[known])
+    th.testing.assert_close(targets[~known], qlearning[~known])
+
+
+def test_random_choice_follows_the_probabilities(model):
+    data = crafted_batch(model, batch_size=20_000)
+    qlearning, sarsa, _ = reference_targets(model, data)
+    targets, use_mc, use_sarsa = targets_at(model, data, mc=0.3, qlearning=0.6)
+    known_return = ~th.isnan(data.mc_returns)
+    known_action = data.next_actions >= 0
+    # Every target is exactly one of the three kinds, as the masks say
+    th.testing.assert_close(targets[use_mc], data.mc_returns[use_mc])
+    th.testing.assert_close(targets[use_sarsa], sarsa[use_sarsa])
+    rest = ~use_mc & ~use_sarsa
+    th.testing.assert_close(targets[rest], qlearning[rest])
+    # Frequencies: P(MC | G known) = 0.3; P(Sarsa | not MC, a' known) = 0.4 (standard error here < 0.006)
+    assert abs(use_mc[known_return].float().mean().item() - 0.3) < 0.03
+    assert not bool(use_mc[~known_return].any())
+    candidates = ~use_mc & known_action
+    assert abs(use_sarsa[candidates].float().mean().item() - 0.4) < 0.03
+
+
+def test_n_step_discounts_are_respected(model):
+    data = crafted_batch(model)._replace(discounts=th.full((400, 1), 0.5))
+    model.mc_prob, model.qlearning_prob = 0.0, 0.0
+    targets, _, _ = targets_at(model, data, mc=0.0, qlearning=0.0)
+    with th.no_grad():
+        next_q = model.q_net_target(data.next_observations)
+    bootstrap = th.where(data.next_actions >= 0, next_q.gather(1, data.next_actions.clamp(min=0)), next_q.max(1, keepdim=True).values)
+    th.testing.assert_close(targets, data.rewards + (1 - data.dones) * 0.5 * bootstrap)
+
+
+# --- schedules ---------------------------------------------------------------------------------------------------
+
+
+def test_schedules_decay_linearly_then_stay():
+    model = OffOnDQN("MlpPolicy", "CartPole-v1", mc_initial_prob=0.9, mc_final_prob=0.1, mc_fraction=0.5,
+                     qlearning_initial_prob=0.2, qlearning_final_prob=0.8, qlearning_fraction=1.0, **SMALL)
+    assert model.mc_schedule(1.0) == pytest.approx(0.9)
+    assert model.mc_schedule(0.75) == pytest.approx(0.5)
+    assert model.mc_schedule(0.5) == pytest.approx(0.1)
+    assert model.mc_schedule(0.1) == pytest.approx(0.1)
+    assert model.qlearning_schedule(0.5) == pytest.approx(0.5)
+    assert model.qlearning_schedule(0.0) == pytest.approx(0.8)
+    model.learn(1000)
+    # The last training call happened near the end: delta1 is at its final value, delta2 close to it
+    assert model.mc_prob == pytest.approx(0.1)
+    assert model.qlearning_prob == pytest.approx(0.8, abs=0.01)
+
+
+# --- bit-identity with DQN ---------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "extra",
+    [
+        {},
+        {"n_steps": 3},
+        {"optimize_memory_usage": True, "replay_buffer_kwargs": {"handle_timeout_termination": False}},
+    ],
+    ids=["1-step", "3-step", "optimize-memory"],
+)
+def test_bit_identical_to_dqn_with_qlearning_only(extra):
+    def train(algo, **kwargs):
+        env = make_vec_env("CartPole-v1", n_envs=2, seed=5)
+        return algo("MlpPolicy", env, seed=5, gradient_steps=2, **SMALL, **extra, **kwargs).learn(800)
+
+    ours, theirs = train(OffOnDQN, **Q_ONLY), train(DQN)
+    assert ours.num_timesteps == theirs.num_timesteps
+    for (name, ours_param), (_, their_param) in zip(ours.policy.state_dict().items(), theirs.policy.state_dict().items()):
+        assert th.equal(ours_param, their_param), name
+    # The Off-On bookkeeping ran all the same
+    assert not np.isnan(ours.replay_buffer.mc_returns).all()
+
+
+# --- end-to-end bookkeeping with VecEnvs -------------------------------------------------------------------------
+
+
+def test_returns_in_training_match_rewards_and_truncation_bootstrap():
+    """Two envs with different time limits: every finished episode's returns follow G_t = r_t + gamma * G_{t+1}."""
+    env = DummyVecEnv([lambda limit=limit: Monitor(gym.make("CartPole-v1", max_episode_steps=limit)) for limit in (9, 40)])
+    env.seed(1)
+    # No gradient step before the end (learning_starts), so the target network is the same throughout
+    model = OffOnDQN("MlpPolicy", env, gamma=0.9, seed=1, exploration_final_eps=1.0, **{**SMALL, "learning_starts": 10_000})
+    model.learn(400)
+    buffer = model.replay_buffer
+    n = buffer.pos
+    for env_index in range(2):
+        rewards, dones = buffer.rewards[:n, env_index], buffer.dones[:n, env_index].astype(bool)
+        timeouts = buffer.timeouts[:n, env_index].astype(bool)
+        ends = np.flatnonzero(dones)
+        assert len(ends) > 3
+        start = 0
+        for end in ends:
+            tail = 0.0
+            if timeouts[end]:
+                final_obs = th.as_tensor(buffer.next_observations[end, env_index][None])
+                with th.no_grad():
+                    tail = model.q_net_target(final_obs).max().item()
+            expected = discounted_returns(rewards[start : end + 1], 0.9, tail)
+            np.testing.assert_allclose(buffer.mc_returns[start : end + 1, env_index], expected, rtol=1e-5)
+            next_actions = buffer.next_actions[start : end + 1, env_index]
+            np.testing.assert_array_equal(next_actions[:-1], buffer.actions[start + 1 : end + 1, env_index, 0])
+            assert next_actions[-1] == -1
+            start = end + 1
+    assert buffer.timeouts[:n, 0].any() and (buffer.dones[:n, 1] * (1 - buffer.timeouts[:n, 1])).any(), (
+        "both truncations and terminations occurred"
+    )
+
+
+def test_terminal_truncation_mode_sets_no_value_function():
+    model = OffOnDQN("MlpPolicy", "CartPole-v1", mc_truncation="terminal", **SMALL)
+    assert model.replay_buffer.truncation_value_fn is None
+    assert OffOnDQN("MlpPolicy", "CartPole-v1", **SMALL).replay_buffer.truncation_value_fn is not None
+
+
+# --- save / load -------------------------------------------------------------------------------------------------
+
+
+def test_save_load_model_buffer_and_resume(tmp_path):
+    kwargs = dict(constant_probs(0.4, 0.6), mc_mixing="convex", sarsa_target="expected", mc_truncation="terminal", loss="mse")
+    model = OffOnDQN("MlpPolicy", "CartPole-v1", seed=3, mc_fraction=0.5, qlearning_fraction=0.7, **kwargs, **SMALL)
+    model.learn(600)
+    model.save(tmp_path / "model.zip")
+    model.save_replay_buffer(tmp_path / "buffer.pkl")
+
+    loaded = OffOnDQN.load(tmp_path / "model.zip", env=gym.make("CartPole-v1"), device="cpu")
+    for name, value in dict(kwargs, mc_fraction=0.5, qlearning_fraction=0.7).items():
+        assert getattr(loaded, name) == value, name
+    assert loaded.target_rng.bit_generator.state == model.target_rng.bit_generator.state, "draws resume where they were"
+    for ours, theirs in zip(model.policy.state_dict().values(), loaded.policy.state_dict().values()):
+        assert th.equal(ours, theirs)
+
+    loaded.load_replay_buffer(tmp_path / "buffer.pkl")
+    buffer, original = loaded.replay_buffer, model.replay_buffer
+    assert isinstance(buffer, OffOnReplayBuffer)
+    np.testing.assert_array_equal(buffer.mc_returns, original.mc_returns)
+    np.testing.assert_array_equal(buffer.next_actions, original.next_actions)
+    np.testing.assert_array_equal(buffer.episode_lengths, original.episode_lengths)
+    assert buffer.truncation_value_fn is None  # mc_truncation="terminal"
+
+    open_envs = buffer.episode_lengths > 0
+    loaded.learn(300, reset_num_timesteps=False)
+    assert loaded.num_timesteps == 900
+    if open_envs.any():
+        # The env was reset by load: the episode open in the buffer was ended (cut), so its returns are known
+        assert not np.isnan(buffer.mc_returns[(original.pos - 1) % buffer.buffer_size, 0])
+
+
+def test_loaded_buffer_gets_the_bootstrap_value_function_back(tmp_path):
+    model = OffOnDQN("MlpPolicy", "CartPole-v1", **SMALL).learn(200)
+    model.save_replay_buffer(tmp_path / "buffer.pkl")
+    with open(tmp_path / "buffer.pkl", "rb") as file:
+        assert pickle.load(file).truncation_value_fn is None, "the pickled buffer holds no reference to the model"
+    other = OffOnDQN("MlpPolicy", "CartPole-v1", **SMALL)
+    other.load_replay_buffer(tmp_path / "buffer.pkl")
+    assert other.replay_buffer.truncation_value_fn == other._target_state_values
+
+
+def test_continued_learning_keeps_episodes_open():
+    model = OffOnDQN("MlpPolicy", "CartPole-v1", **SMALL)
+    buffer = model.replay_buffer
+    for _ in range(5):
+        model.learn(8, reset_num_timesteps=False)
+        last_slot = buffer.pos - 1
+        was_running = buffer.episode_lengths[0] > 0
+        model.learn(4, reset_num_timesteps=False)
+        if was_running:
+            # Same env, not reset: the running episode went on instead of being cut, so the action links up
+            assert buffer.next_actions[last_slot, 0] == buffer.actions[last_slot + 1, 0, 0]
+    model.learn(4)  # reset_num_timesteps=True resets the env: the running episode is cut and gets its returns
+    assert not np.isnan(buffer.mc_returns[buffer.pos - 5, 0])
+
+
+# --- observation types, n-step, other buffers --------------------------------------------------------------------
+
+
+def test_dict_observations():
+    model = OffOnDQN("MultiInputPolicy", SimpleMultiObsEnv(random_start=True), **{**SMALL, "learning_starts": 50, "batch_size": 8})
+    assert isinstance(model.replay_buffer, OffOnDictReplayBuffer)
+    model.learn(200)
+    assert not np.isnan(model.replay_buffer.mc_returns).all()
+
+
+def test_image_observations():
+    env = FakeImageEnv(screen_height=40, screen_width=40, n_channels=1, discrete=True)
+    small_cnn = dict(**{**SMALL, "learning_starts": 50, "buffer_size": 300, "batch_size": 8, "policy_kwargs": None})
+    model = OffOnDQN("CnnPolicy", env, **small_cnn).learn(120)
+    assert not np.isnan(model.replay_buffer.mc_returns).all()
+    assert model.replay_buffer.observations.dtype == np.uint8
+
+
+def test_n_steps_uses_the_n_step_buffer_without_warning():
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        model = OffOnDQN("MlpPolicy", "CartPole-v1", n_steps=3, **SMALL)
+    assert isinstance(model.replay_buffer, OffOnNStepReplayBuffer) and model.replay_buffer.n_steps == 3
+    model.learn(300)
+
+
+def test_plain_buffer_warns_once_and_trains_with_qlearning():
+    with pytest.warns(UserWarning, match="Q-learning targets only"):
+        model = OffOnDQN("MlpPolicy", "CartPole-v1", replay_buffer_class=ReplayBuffer, **SMALL)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        model.learn(300)
+    assert model._n_updates > 0
+
+
+# --- bad input ---------------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "name, value",
+    [
+        ("mc_initial_prob", 1.5),
+        ("mc_final_prob", -0.1),
+        ("qlearning_initial_prob", 2.0),
+        ("qlearning_final_prob", -1.0),
+        ("mc_fraction", 0.0),
+        ("qlearning_fraction", 1.2),
+        ("mc_mixing", "average"),
+        ("sarsa_target", "greedy"),
+        ("mc_truncation", "ignore"),
+        ("loss", "l1"),
+    ],
+)
+def test_bad_input_names_the_parameter(name, value):
+    with pytest.raises(ValueError, match=name):
+        OffOnDQN("MlpPolicy", "CartPole-v1", **{name: value})
+
+
+# --- logging -----------------------------------------------------------------------------------------------------
+
+
+class RecordingWriter(KVWriter):
+    def __init__(self):
+        self.records = []
+
+    def write(self, key_values, key_excluded, step=0):
+        self.records.append(dict(key_values))
+
+
+def test_training_statistics_are_logged(tmp_path):
+    model = OffOnDQN("MlpPolicy", "CartPole-v1", tensorboard_log=str(tmp_path), **constant_probs(0.5, 0.5), **SMALL)
+    writer = RecordingWriter()
+    model.learn(1, tb_log_name="probe")  # sets up a logger; replaced below to capture what is written
+    model.set_logger(Logger(folder=None, output_formats=[writer]))
+    model.learn(800, log_interval=1, reset_num_timesteps=False)
+    train_records = [record for record in writer.records if "train/loss" in record]
+    assert train_records
+    record = train_records[-1]
+    assert record["train/mc_prob"] == 0.5 and record["train/qlearning_prob"] == 0.5
+    # MC: delta1 times the share of sampled transitions whose return is known; Sarsa: of the rest, half
+    assert 0.2 < record["train/mc_target_fraction"] <= 0.55
+    assert 0.1 < record["train/sarsa_target_fraction"] < 0.4
+    assert np.isfinite(record["train/q_mc_gap"])
+    assert (tmp_path / "probe_1").is_dir(), "tensorboard logs are written"
+
+
+def test_tensorboard_default_run_name(tmp_path):
+    OffOnDQN("MlpPolicy", "CartPole-v1", tensorboard_log=str(tmp_path), **SMALL).learn(200)
+    assert (tmp_path / "OffOnDQN_1").is_dir()
