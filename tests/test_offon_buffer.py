@@ -181,7 +181,7 @@ def test_samples_carry_returns_and_next_actions_of_their_own_slot_and_env():
                 expected_next[episodes[env][-1][0], env] = actions[env]
             episodes[env].append((t, rewards[env]))
             if dones[env]:
-                slots, episode_rewards = zip(*episodes[env])
+                slots, episode_rewards = zip(*episodes[env], strict=True)
                 expected_returns[list(slots), env] = discounted_returns(np.array(episode_rewards), GAMMA)
                 episodes[env] = []
         step(buffer, rewards, actions, dones=dones, obs_ids=t * 10 + np.arange(n_envs))

@@ -9,8 +9,8 @@ import pytest
 import torch as th
 from stable_baselines3 import DQN
 from stable_baselines3.common.buffers import ReplayBuffer
-from stable_baselines3.common.envs import FakeImageEnv, SimpleMultiObsEnv
 from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.envs import FakeImageEnv, SimpleMultiObsEnv
 from stable_baselines3.common.logger import KVWriter, Logger
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv
@@ -18,8 +18,15 @@ from stable_baselines3.common.vec_env import DummyVecEnv
 from sb3_offon import OffOnDictReplayBuffer, OffOnDQN, OffOnNStepReplayBuffer, OffOnReplayBuffer
 from sb3_offon.common.buffers import OffOnReplayBufferSamples, discounted_returns
 
-SMALL = dict(learning_starts=100, buffer_size=2000, batch_size=32, train_freq=4, target_update_interval=100,
-             policy_kwargs=dict(net_arch=[16]), device="cpu")
+SMALL = dict(
+    learning_starts=100,
+    buffer_size=2000,
+    batch_size=32,
+    train_freq=4,
+    target_update_interval=100,
+    policy_kwargs=dict(net_arch=[16]),
+    device="cpu",
+)
 Q_ONLY = dict(mc_initial_prob=0.0, mc_final_prob=0.0, qlearning_initial_prob=1.0, qlearning_final_prob=1.0)
 
 
@@ -156,7 +163,9 @@ def test_n_step_discounts_are_respected(model):
     targets, _, _ = targets_at(model, data, mc=0.0, qlearning=0.0)
     with th.no_grad():
         next_q = model.q_net_target(data.next_observations)
-    bootstrap = th.where(data.next_actions >= 0, next_q.gather(1, data.next_actions.clamp(min=0)), next_q.max(1, keepdim=True).values)
+    bootstrap = th.where(
+        data.next_actions >= 0, next_q.gather(1, data.next_actions.clamp(min=0)), next_q.max(1, keepdim=True).values
+    )
     th.testing.assert_close(targets, data.rewards + (1 - data.dones) * 0.5 * bootstrap)
 
 
@@ -164,8 +173,17 @@ def test_n_step_discounts_are_respected(model):
 
 
 def test_schedules_decay_linearly_then_stay():
-    model = OffOnDQN("MlpPolicy", "CartPole-v1", mc_initial_prob=0.9, mc_final_prob=0.1, mc_fraction=0.5,
-                     qlearning_initial_prob=0.2, qlearning_final_prob=0.8, qlearning_fraction=1.0, **SMALL)
+    model = OffOnDQN(
+        "MlpPolicy",
+        "CartPole-v1",
+        mc_initial_prob=0.9,
+        mc_final_prob=0.1,
+        mc_fraction=0.5,
+        qlearning_initial_prob=0.2,
+        qlearning_final_prob=0.8,
+        qlearning_fraction=1.0,
+        **SMALL,
+    )
     assert model.mc_schedule(1.0) == pytest.approx(0.9)
     assert model.mc_schedule(0.75) == pytest.approx(0.5)
     assert model.mc_schedule(0.5) == pytest.approx(0.1)
@@ -197,7 +215,9 @@ def test_bit_identical_to_dqn_with_qlearning_only(extra):
 
     ours, theirs = train(OffOnDQN, **Q_ONLY), train(DQN)
     assert ours.num_timesteps == theirs.num_timesteps
-    for (name, ours_param), (_, their_param) in zip(ours.policy.state_dict().items(), theirs.policy.state_dict().items()):
+    for (name, ours_param), (_, their_param) in zip(
+        ours.policy.state_dict().items(), theirs.policy.state_dict().items(), strict=True
+    ):
         assert th.equal(ours_param, their_param), name
     # The Off-On bookkeeping ran all the same
     assert not np.isnan(ours.replay_buffer.mc_returns).all()
@@ -258,7 +278,7 @@ def test_save_load_model_buffer_and_resume(tmp_path):
     for name, value in dict(kwargs, mc_fraction=0.5, qlearning_fraction=0.7).items():
         assert getattr(loaded, name) == value, name
     assert loaded.target_rng.bit_generator.state == model.target_rng.bit_generator.state, "draws resume where they were"
-    for ours, theirs in zip(model.policy.state_dict().values(), loaded.policy.state_dict().values()):
+    for ours, theirs in zip(model.policy.state_dict().values(), loaded.policy.state_dict().values(), strict=True):
         assert th.equal(ours, theirs)
 
     loaded.load_replay_buffer(tmp_path / "buffer.pkl")
@@ -306,7 +326,9 @@ def test_continued_learning_keeps_episodes_open():
 
 
 def test_dict_observations():
-    model = OffOnDQN("MultiInputPolicy", SimpleMultiObsEnv(random_start=True), **{**SMALL, "learning_starts": 50, "batch_size": 8})
+    model = OffOnDQN(
+        "MultiInputPolicy", SimpleMultiObsEnv(random_start=True), **{**SMALL, "learning_starts": 50, "batch_size": 8}
+    )
     assert isinstance(model.replay_buffer, OffOnDictReplayBuffer)
     model.learn(200)
     assert not np.isnan(model.replay_buffer.mc_returns).all()

@@ -137,7 +137,7 @@ class OffOnBufferMixin:
             tails = np.zeros(len(done_envs))
             if truncated.any():
                 tails[truncated] = self._state_values(next_obs, done_envs[truncated])
-            for env, tail in zip(done_envs, tails):
+            for env, tail in zip(done_envs, tails, strict=True):
                 self._finish_episode(env, tail)
 
     def _log_rewards(self, reward: np.ndarray) -> None:
@@ -179,7 +179,7 @@ class OffOnBufferMixin:
             return
         last_slot = (self._n_adds - 1) % self.buffer_size
         tails = self._state_values(self._stored_next_observations(last_slot), running)
-        for env, tail in zip(running, tails):
+        for env, tail in zip(running, tails, strict=True):
             self._finish_episode(env, tail)
 
     def _stored_next_observations(self, slot: int) -> Any:
@@ -245,7 +245,9 @@ class OffOnReplayBuffer(OffOnBufferMixin, ReplayBuffer):
         handle_timeout_termination: bool = True,
         gamma: float = 0.99,
     ):
-        super().__init__(buffer_size, observation_space, action_space, device, n_envs, optimize_memory_usage, handle_timeout_termination)
+        super().__init__(
+            buffer_size, observation_space, action_space, device, n_envs, optimize_memory_usage, handle_timeout_termination
+        )
         self._init_offon(gamma)
 
 
@@ -316,5 +318,7 @@ class OffOnDictReplayBuffer(OffOnBufferMixin, DictReplayBuffer):
         handle_timeout_termination: bool = True,
         gamma: float = 0.99,
     ):
-        super().__init__(buffer_size, observation_space, action_space, device, n_envs, optimize_memory_usage, handle_timeout_termination)
+        super().__init__(
+            buffer_size, observation_space, action_space, device, n_envs, optimize_memory_usage, handle_timeout_termination
+        )
         self._init_offon(gamma)

@@ -244,7 +244,9 @@ class OffOnDQN(DQN):
             super()._setup_model()
 
         self.mc_schedule = LinearSchedule(self.mc_initial_prob, self.mc_final_prob, self.mc_fraction)
-        self.qlearning_schedule = LinearSchedule(self.qlearning_initial_prob, self.qlearning_final_prob, self.qlearning_fraction)
+        self.qlearning_schedule = LinearSchedule(
+            self.qlearning_initial_prob, self.qlearning_final_prob, self.qlearning_fraction
+        )
         self._connect_replay_buffer()
 
     def _connect_replay_buffer(self) -> None:
@@ -298,7 +300,9 @@ class OffOnDQN(DQN):
         self._update_learning_rate(self.policy.optimizer)
         loss_fn = LOSS_FUNCTIONS[self.loss]
         # All of this call's target draws at once: uniforms for the MC choice and for the Q-learning/Sarsa choice
-        uniforms = th.as_tensor(self.target_rng.random((2, gradient_steps, batch_size, 1), dtype=np.float32), device=self.device)
+        uniforms = th.as_tensor(
+            self.target_rng.random((2, gradient_steps, batch_size, 1), dtype=np.float32), device=self.device
+        )
         losses, q_taken, mc_returns, mc_chosen, sarsa_chosen = [], [], [], [], []
         for step in range(gradient_steps):
             replay_data: OffOnReplayBufferSamples = self.replay_buffer.sample(batch_size, env=self._vec_normalize_env)  # type: ignore[assignment]
