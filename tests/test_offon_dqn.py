@@ -10,7 +10,7 @@ import torch as th
 from stable_baselines3 import DQN
 from stable_baselines3.common.buffers import ReplayBuffer
 from stable_baselines3.common.env_util import make_vec_env
-from stable_baselines3.common.envs import FakeImageEnv, SimpleMultiObsEnv
+from stable_baselines3.common.envs import FakeImageEnv, IdentityEnv, SimpleMultiObsEnv
 from stable_baselines3.common.logger import KVWriter, Logger
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv
@@ -413,3 +413,11 @@ def test_training_statistics_are_logged(tmp_path):
 def test_tensorboard_default_run_name(tmp_path):
     OffOnDQN("MlpPolicy", "CartPole-v1", tensorboard_log=str(tmp_path), **SMALL).learn(200)
     assert (tmp_path / "OffOnDQN_1").is_dir()
+
+
+def test_discrete_observations_with_truncated_episodes():
+    # IdentityEnv ends every episode by truncation: the bootstrap sees Discrete observations in the buffer's layout
+    model = OffOnDQN("MlpPolicy", IdentityEnv(5, ep_length=20), **{**SMALL, "learning_starts": 30})
+    model.learn(100)
+    model.learn(30)  # a second learn() resets the env and ends the open episode, bootstrapped the same way
+    assert not np.isnan(model.replay_buffer.mc_returns[:120]).any()

@@ -6,7 +6,6 @@ from typing import Any, NamedTuple
 import numpy as np
 import torch as th
 from gymnasium import spaces
-from scipy.signal import lfilter
 from stable_baselines3.common.buffers import DictReplayBuffer, NStepReplayBuffer, ReplayBuffer
 from stable_baselines3.common.type_aliases import TensorDict
 from stable_baselines3.common.vec_env import VecNormalize
@@ -53,6 +52,9 @@ def discounted_returns(rewards: np.ndarray, gamma: float, tail_value: float = 0.
     :param tail_value: the value of the state after the last step (0 for a terminated episode)
     :return: float64 array of G_0 .. G_{T-1}
     """
+    # Imported here: scipy.signal takes seconds to import, which every CLI process would pay up front
+    from scipy.signal import lfilter
+
     # lfilter runs y[t] = x[t] + gamma * y[t-1]; on the reversed rewards, with the tail as the first element, that is
     # the backward recursion. It is exact in float64 for any length, unlike the gamma^-t cumulative-sum trick.
     reversed_with_tail = np.concatenate(([tail_value], rewards[::-1].astype(np.float64)))

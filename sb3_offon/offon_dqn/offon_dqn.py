@@ -7,7 +7,7 @@ from gymnasium import spaces
 from stable_baselines3.common.buffers import ReplayBuffer
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
-from stable_baselines3.common.utils import LinearSchedule
+from stable_baselines3.common.utils import LinearSchedule, obs_as_tensor
 from stable_baselines3.dqn import DQN
 from stable_baselines3.dqn.policies import DQNPolicy
 from torch.nn import functional as F
@@ -268,7 +268,9 @@ class OffOnDQN(DQN):
         """max_a Q_target(s, a) of a batch of unnormalised observations (the bootstrap of truncated episodes)."""
         if self._vec_normalize_env is not None:
             observations = self._vec_normalize_env.normalize_obs(observations)
-        obs_tensor, _ = self.policy.obs_to_tensor(observations)
+        # Observations come in the replay buffer's layout (a Discrete observation is stored as shape (1,)): convert
+        # them as the buffer converts its samples, onto the networks' device
+        obs_tensor = obs_as_tensor(observations, self.policy.device)
         with th.no_grad():
             return self.q_net_target(obs_tensor).max(dim=1).values.cpu().numpy()
 

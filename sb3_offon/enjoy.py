@@ -1,0 +1,58 @@
+"""
+``python -m sb3_offon.enjoy``: rl-baselines3-zoo's ``enjoy`` (replay a trained agent) with the sb3_offon algorithms.
+
+Every flag of ``python -m rl_zoo3.enjoy`` works (``--algo``, ``--env``, ``-f``, ``-n``, ``--exp-id``,
+``--no-render``, ``--load-best``, ``--load-checkpoint``, ``--deterministic``, ...).
+
+Example::
+
+    python -m sb3_offon.enjoy --algo offon_dqn --env CartPole-v1 -f logs -n 2000 --no-render
+"""
+
+from typing import Any
+
+import rl_zoo3.enjoy as zoo_enjoy
+from stable_baselines3.common.base_class import BaseAlgorithm
+
+from sb3_offon.zoo import ALGOS, register
+
+
+class ReplayLoader:
+    """
+    Stands for an off-policy algorithm in ``rl_zoo3.enjoy``: loads it with a one-transition replay buffer.
+
+    The zoo's ``enjoy`` shrinks the replay buffer only for the algorithms of a hard-coded list of names (``dqn``,
+    ``qrdqn``, ...); any other off-policy model would allocate its full buffer (gigabytes on Atari) just to be
+    replayed. ``enjoy`` only calls ``ALGOS[algo].load``, so this stand-in supplies the same keyword arguments the zoo
+    gives to ``dqn``.
+
+    :param algo_class: the algorithm class to load
+    """
+
+    def __init__(self, algo_class: type[BaseAlgorithm]) -> None:
+        self.algo_class = algo_class
+
+    def load(self, path: Any, **kwargs: Any) -> BaseAlgorithm:
+        """
+        Load a saved model for replay.
+
+        :param path: the saved model (zip)
+        :param kwargs: the keyword arguments of ``BaseAlgorithm.load``
+        :return: the loaded model
+        """
+        kwargs.setdefault("buffer_size", 1)
+        # A memory-efficient buffer cannot be combined with SB3's default timeout handling: disable it, as the zoo does
+        kwargs.setdefault("optimize_memory_usage", False)
+        return self.algo_class.load(path, **kwargs)
+
+
+def main() -> None:
+    """Register the algorithms, then run the zoo's ``enjoy`` command line on ``sys.argv``."""
+    register()
+    # A copy for enjoy alone: training keeps the real classes
+    zoo_enjoy.ALGOS = {**zoo_enjoy.ALGOS, **{name: ReplayLoader(cls) for name, cls in ALGOS.items()}}  # type: ignore[assignment]
+    zoo_enjoy.enjoy()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,189 @@
+"""
+Registration of the sb3_offon algorithms into rl-baselines3-zoo (``rl_zoo3``).
+
+The zoo has no plugin hook: its algorithms are the dict ``rl_zoo3.utils.ALGOS`` (shared by ``rl_zoo3.train``,
+``rl_zoo3.exp_manager`` and ``rl_zoo3.enjoy``), its Optuna samplers the dict
+``rl_zoo3.hyperparams_opt.HYPERPARAMS_SAMPLER``, and its documented way to add an algorithm is to extend them before
+calling ``rl_zoo3.train.train()`` (docs/guide/sbx.md). :func:`register` does that, and also makes the bundled YAML
+files the default ``-conf``:
+
+- no ``-conf``: ``sb3_offon/hyperparams/{algo}.yml`` when this package ships one (the three algorithms here and
+  ``dqn``, a copy of the zoo's tuned DQN entries, so that benchmarks compare like with like), else the zoo's own file;
+- ``-conf paper`` (any name of a sub-folder of ``sb3_offon/hyperparams``): ``sb3_offon/hyperparams/paper/{algo}.yml``,
+  the paper's own settings, found inside the installed package;
+- any other ``-conf`` (a YAML or Python file, a module): the zoo's behaviour, untouched.
+"""
+
+import inspect
+from pathlib import Path
+from typing import Any
+
+import optuna
+import rl_zoo3.enjoy as zoo_enjoy
+import rl_zoo3.exp_manager as zoo_exp_manager
+import rl_zoo3.hyperparams_opt as zoo_hyperparams_opt
+import rl_zoo3.train as zoo_train
+import rl_zoo3.utils as zoo_utils
+from rl_zoo3.exp_manager import ExperimentManager
+from rl_zoo3.hyperparams_opt import convert_offpolicy_params, sample_dqn_params
+from stable_baselines3.common.base_class import BaseAlgorithm
+
+# Registers CartPoleFallPenalty-v1 and MountainCarGoalBonus-v0 (also done by ``import sb3_offon``)
+import sb3_offon.envs  # noqa: F401
+from sb3_offon.offon_dqn import OffOnDQN
+from sb3_offon.offon_dqn.offon_dqn import LOSS_FUNCTIONS, MC_MIXING_OPTIONS, MC_TRUNCATION_OPTIONS, SARSA_TARGET_OPTIONS
+from sb3_offon.variants import DQNMC, DQNSarsa
+
+HYPERPARAMS_DIR = Path(__file__).resolve().parent / "hyperparams"
+
+# The names are the contract of the command line and of the log folders (logs/{algo}/...)
+ALGOS: dict[str, type[BaseAlgorithm]] = {
+    "offon_dqn": OffOnDQN,
+    "dqn_mc": DQNMC,
+    "dqn_sarsa": DQNSarsa,
+}
+
+
+def resolve_config(algo: str, config: str | None) -> str | None:
+    """
+    The hyperparameter file the zoo should read for ``algo`` given the ``-conf`` argument.
+
+    :param algo: the ``--algo`` name
+    :param config: the ``-conf`` argument (None when absent)
+    :return: the bundled ``{algo}.yml`` when ``config`` is None and this package ships one; the bundled
+        ``{config}/{algo}.yml`` when ``config`` names a bundled set (``paper``); otherwise ``config`` unchanged
+        (None lets the zoo use its own ``hyperparams/{algo}.yml``)
+    """
+    if config is None:
+        bundled = HYPERPARAMS_DIR / f"{algo}.yml"
+        return str(bundled) if bundled.is_file() else None
+    # A plain name (no path, no suffix, no dotted module) that is a bundled folder
+    if config.isidentifier() and (HYPERPARAMS_DIR / config).is_dir():
+        bundled = HYPERPARAMS_DIR / config / f"{algo}.yml"
+        if not bundled.is_file():
+            available = sorted(path.stem for path in (HYPERPARAMS_DIR / config).glob("*.yml"))
+            raise FileNotFoundError(f"The bundled hyperparameter set '{config}' has no file for {algo}: {available}")
+        return str(bundled)
+    return config
+
+
+class OffOnExperimentManager(ExperimentManager):
+    """
+    The zoo's ``ExperimentManager``, reading this package's hyperparameter files by default (see :func:`resolve_config`).
+
+    The resolved path is also written back to ``args.conf_file``, so that the run's ``args.yml`` names the file
+    that was actually read.
+
+    :param args: the parsed command line (``argparse.Namespace``)
+    :param algo: the ``--algo`` name
+    :param positional: the other positional arguments of ``ExperimentManager``
+    :param keywords: the other keyword arguments of ``ExperimentManager`` (``config`` included)
+    """
+
+    def __init__(self, args: Any, algo: str, *positional: Any, **keywords: Any) -> None:
+        # Bound against the parent's signature: ``config`` is found whether it came by position or by keyword
+        bound = inspect.signature(ExperimentManager.__init__).bind(self, args, algo, *positional, **keywords)
+        bound.apply_defaults()
+        bound.arguments["config"] = resolve_config(algo, bound.arguments["config"])
+        if bound.arguments["config"] is not None and hasattr(args, "conf_file"):
+            args.conf_file = bound.arguments["config"]
+        super().__init__(*bound.args[1:], **bound.kwargs)
+
+
+def _sample_mc_params(trial: optuna.Trial) -> dict[str, Any]:
+    """delta1, the probability of the Monte-Carlo target, as a decaying schedule (the paper's shape), and the MC options."""
+    return {
+        "mc_initial_prob": trial.suggest_float("mc_initial_prob", 0.5, 1.0),
+        "mc_final_prob": trial.suggest_float("mc_final_prob", 0.0, 0.5),
+        "mc_fraction": trial.suggest_float("mc_fraction", 0.1, 1.0),
+        "mc_mixing": trial.suggest_categorical("mc_mixing", list(MC_MIXING_OPTIONS)),
+        "mc_truncation": trial.suggest_categorical("mc_truncation", list(MC_TRUNCATION_OPTIONS)),
+    }
+
+
+def _sample_qlearning_params(trial: optuna.Trial) -> dict[str, Any]:
+    """delta2, the probability of Q-learning given a TD target, as a decaying schedule, and the Sarsa option."""
+    return {
+        "qlearning_initial_prob": trial.suggest_float("qlearning_initial_prob", 0.5, 1.0),
+        "qlearning_final_prob": trial.suggest_float("qlearning_final_prob", 0.0, 0.5),
+        "qlearning_fraction": trial.suggest_float("qlearning_fraction", 0.1, 1.0),
+        "sarsa_target": trial.suggest_categorical("sarsa_target", list(SARSA_TARGET_OPTIONS)),
+    }
+
+
+def _sample_offon_params(
+    trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict, mc: bool, sarsa: bool
+) -> dict[str, Any]:
+    # DQN's own parameters exactly as the zoo samples them for ``dqn``, so that tuning budgets compare
+    hyperparams = sample_dqn_params(trial, n_actions, n_envs, additional_args)
+    # Parameters a variant fixes are not sampled: they would only dilute the search
+    if mc:
+        hyperparams.update(_sample_mc_params(trial))
+    if sarsa:
+        hyperparams.update(_sample_qlearning_params(trial))
+    hyperparams["loss"] = trial.suggest_categorical("loss", list(LOSS_FUNCTIONS))
+    return hyperparams
+
+
+def sample_offon_dqn_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
+    """
+    Sampler for OffOnDQN hyperparams: the zoo's DQN parameters, the delta1 and delta2 schedules, the string options.
+
+    The schedules are sampled as decaying ones (initial in [0.5, 1], final in [0, 0.5]), the paper's shape.
+
+    :param trial: the Optuna trial
+    :param n_actions: number of actions (unused by DQN, part of the zoo's sampler signature)
+    :param n_envs: number of training envs
+    :param additional_args: the zoo's extra arguments (``using_her_replay_buffer``, ``her_kwargs``)
+    :return: the keyword arguments of the algorithm
+    """
+    return _sample_offon_params(trial, n_actions, n_envs, additional_args, mc=True, sarsa=True)
+
+
+def sample_dqn_mc_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
+    """
+    Sampler for DQNMC hyperparams: as :func:`sample_offon_dqn_params`, with delta2 left at 1 (no Sarsa).
+
+    :param trial: the Optuna trial
+    :param n_actions: number of actions (unused by DQN, part of the zoo's sampler signature)
+    :param n_envs: number of training envs
+    :param additional_args: the zoo's extra arguments (``using_her_replay_buffer``, ``her_kwargs``)
+    :return: the keyword arguments of the algorithm
+    """
+    return _sample_offon_params(trial, n_actions, n_envs, additional_args, mc=True, sarsa=False)
+
+
+def sample_dqn_sarsa_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
+    """
+    Sampler for DQNSarsa hyperparams: as :func:`sample_offon_dqn_params`, with delta1 left at 0 (no Monte-Carlo).
+
+    :param trial: the Optuna trial
+    :param n_actions: number of actions (unused by DQN, part of the zoo's sampler signature)
+    :param n_envs: number of training envs
+    :param additional_args: the zoo's extra arguments (``using_her_replay_buffer``, ``her_kwargs``)
+    :return: the keyword arguments of the algorithm
+    """
+    return _sample_offon_params(trial, n_actions, n_envs, additional_args, mc=False, sarsa=True)
+
+
+SAMPLERS = {
+    "offon_dqn": sample_offon_dqn_params,
+    "dqn_mc": sample_dqn_mc_params,
+    "dqn_sarsa": sample_dqn_sarsa_params,
+}
+
+
+def register() -> None:
+    """
+    Register the algorithms, their samplers and the bundled hyperparameter files into ``rl_zoo3``.
+
+    Call it before ``rl_zoo3.train.train()`` or ``rl_zoo3.enjoy.enjoy()``: their ``--algo`` choices are read from
+    ``ALGOS`` when the argument parser is built. Calling it again does nothing more.
+    """
+    # Every module's ALGOS is the same dict today; each is updated anyway, in case a zoo release copies it
+    for module in (zoo_utils, zoo_train, zoo_exp_manager, zoo_enjoy):
+        module.ALGOS.update(ALGOS)
+    zoo_hyperparams_opt.HYPERPARAMS_SAMPLER.update(SAMPLERS)
+    # Our optuna parameter names are the constructor's: the off-policy converter passes them through
+    zoo_hyperparams_opt.HYPERPARAMS_CONVERTER.update({name: convert_offpolicy_params for name in ALGOS})
+    zoo_train.ExperimentManager = OffOnExperimentManager  # type: ignore[misc]

@@ -1,0 +1,441 @@
+"""
+Benchmark runner: a grid of algorithms x environments x seeds, each run being ``python -m sb3_offon.train``.
+
+Every run goes through the same code path as the command line (rl-baselines3-zoo's ``train`` with the sb3_offon
+algorithms registered), in its own subprocess: the zoo's ``train()`` parses ``sys.argv`` and holds global state, and a
+subprocess keeps runs isolated and makes a crash visible as a return code. Each run trains with one torch thread on the
+CPU and evaluates the deterministic policy every ``--eval-freq`` steps (the zoo's ``EvalCallback``).
+
+Hyperparameter sets: ``--set tuned`` reads the bundled ``hyperparams/{algo}.yml`` (the zoo's tuned DQN settings for
+every variant), ``--set paper`` the paper's settings in ``hyperparams/paper/{algo}.yml`` (``-conf paper``).
+
+Output, in the zoo's layout ``{log folder}/{algo}/{env}_{run id}`` with the seed as run id (so that
+``python -m rl_zoo3.plots.plot_train -f <root>/<set> ...`` reads it too)::
+
+    <root>/<set>/<algo>/<env>_<seed>/
+        0.monitor.csv          training episodes (r, l, t; plus goal_reached on MountainCarGoalBonus-v0)
+        evaluations.npz        periodic deterministic evaluations (timesteps, results, ep_lengths)
+        <env>/config.yml       the hyperparameters used; args.yml, command.txt: the zoo's record of the command
+        train.log              the tail of the run's output
+        done.json              the finished marker: spec, return code, wall time, host, code version
+
+Only these small files are kept: the model zips (final and best) and replay buffers stay in the run's scratch folder,
+which is deleted. A run is *finished* when ``done.json`` exists, its return code is 0 and ``evaluations.npz`` holds the
+number of evaluations it records; finished runs are skipped, any other run folder (a crash, an interrupted grid, a
+deleted file) is wiped and redone. A finished run made with other settings (budget, evaluation, ``--hyperparams``)
+stops the runner before anything starts, unless ``--force`` redoes it.
+
+The task function :func:`run_one` runs the command in a fresh temporary folder and returns the kept files as bytes;
+the driver writes them, so a Ray cluster needs no shared file system (only ``sb3_offon`` installed on every node).
+Locally, a pool of ``--workers`` threads (default: all cores) each waits on one training subprocess; with ``--ray``
+the same function becomes a Ray task (one CPU each), on a local Ray instance or, with ``--ray-address``, on a cluster.
+
+Usage::
+
+    # the paper's settings, Figures 8, 10, 12: CartPole-v1, MountainCar-v0, LunarLander-v3, four variants, 10 seeds
+    python scripts/benchmark.py --set paper
+    # the tuned settings (also Acrobot-v1)
+    python scripts/benchmark.py --set tuned
+    # Section 4.4
+    python scripts/benchmark.py --set paper --envs CartPoleFallPenalty-v1 MountainCarGoalBonus-v0
+    # on a Ray cluster
+    python scripts/benchmark.py --set paper --ray-address auto
+"""
+
+import argparse
+import concurrent.futures
+import importlib.util
+import json
+import os
+import shutil
+import socket
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Iterator
+from datetime import datetime, timezone
+from pathlib import Path
+
+import numpy as np
+import yaml
+from tqdm import tqdm
+
+ALGOS = ["offon_dqn", "dqn_mc", "dqn_sarsa", "dqn"]
+# The paper's Figures 8, 10 and 12; the tuned set also has the zoo's Acrobot-v1 entry
+DEFAULT_ENVS = {
+    "paper": ["CartPole-v1", "MountainCar-v0", "LunarLander-v3"],
+    "tuned": ["CartPole-v1", "MountainCar-v0", "LunarLander-v3", "Acrobot-v1"],
+}
+# The runs' own settings that define a result: a finished run made with other values is not the requested run
+IDENTITY = ("n_timesteps", "eval_freq", "eval_episodes", "hyperparams")
+# Files of the zoo's run folder worth keeping (small); model zips and replay buffers are not
+KEEP_SUFFIXES = {".csv", ".npz", ".yml", ".yaml", ".txt", ".json"}
+KEEP_NAMES = {"vecnormalize.pkl"}
+LOG_TAIL_LINES = 60
+DONE, FAILED = "done.json", "failed.json"
+
+
+def hyperparams_dir() -> Path:
+    """The bundled hyperparameter folder of the installed ``sb3_offon`` (found without importing it: no torch here)."""
+    spec = importlib.util.find_spec("sb3_offon")
+    if spec is None or not spec.submodule_search_locations:
+        raise SystemExit("sb3_offon is not installed in this interpreter: pip install -e '.[zoo,bench]'")
+    return Path(next(iter(spec.submodule_search_locations))) / "hyperparams"
+
+
+def available_sets() -> list[str]:
+    return ["tuned", *sorted(path.name for path in hyperparams_dir().iterdir() if path.is_dir())]
+
+
+def parse_seeds(tokens: list[str]) -> list[int]:
+    """``10``: seeds 0..9; ``0 3 7``: those seeds; ``5-9``: a range (inclusive)."""
+    if len(tokens) == 1 and tokens[0].isdigit():
+        return list(range(int(tokens[0])))
+    seeds: list[int] = []
+    for token in tokens:
+        first, _, last = token.partition("-")
+        seeds.extend(range(int(first), int(last or first) + 1))
+    return sorted(set(seeds))
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawTextHelpFormatter)
+    parser.add_argument("--set", default="paper", choices=available_sets(), help="hyperparameter set (default: paper)")
+    parser.add_argument("--algos", nargs="+", default=ALGOS, help=f"algorithms (default: {' '.join(ALGOS)})")
+    parser.add_argument("--envs", nargs="+", default=None, help="env ids (default: the set's benchmark envs)")
+    parser.add_argument("--seeds", nargs="+", default=["10"], help="a count (10: seeds 0-9), a list (0 3 7) or a range (5-9)")
+    parser.add_argument("-n", "--n-timesteps", type=int, default=None, help="override the budget of every run (tests)")
+    parser.add_argument("--eval-freq", type=int, default=None, help="env steps between evaluations (default: budget / 20)")
+    parser.add_argument("--n-evals", type=int, default=20, help="evaluations per run when --eval-freq is not given")
+    parser.add_argument("--eval-episodes", type=int, default=10, help="episodes per evaluation (default: 10)")
+    parser.add_argument(
+        "--hyperparams", nargs="+", default=[], help="extra overrides passed to the zoo, e.g. learning_starts:100"
+    )
+    parser.add_argument("--root", type=Path, default=Path("results/raw"), help="results root (default: results/raw)")
+    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="parallel runs (default: all cores)")
+    parser.add_argument("--ray", action="store_true", help="run the tasks on Ray (a local instance unless --ray-address)")
+    parser.add_argument("--ray-address", default=None, help="join this Ray cluster ('auto', 'ray://host:10001', ...)")
+    parser.add_argument("--device", default="cpu", help="torch device of the runs (default: cpu)")
+    parser.add_argument("--timeout", type=float, default=None, help="seconds after which a run is killed (and failed)")
+    parser.add_argument("--force", action="store_true", help="redo finished runs that were made with other settings")
+    parser.add_argument("--dry-run", action="store_true", help="list the runs and their commands, run nothing")
+    args = parser.parse_args(argv)
+    args.seeds = parse_seeds(args.seeds)
+    args.envs = args.envs or DEFAULT_ENVS.get(args.set, DEFAULT_ENVS["paper"])
+    args.ray = args.ray or args.ray_address is not None
+    return args
+
+
+# ----------------------------------------------------------------------------------------------------------------------
+# The grid: one spec (a plain dict, sent to the task function) per run
+# ----------------------------------------------------------------------------------------------------------------------
+def config_file(hyperparams_set: str, algo: str) -> Path:
+    folder = hyperparams_dir()
+    return folder / f"{algo}.yml" if hyperparams_set == "tuned" else folder / hyperparams_set / f"{algo}.yml"
+
+
+def build_specs(args: argparse.Namespace) -> list[dict]:
+    """One spec per (algo, env, seed); the budget and settings are read from the set's YAML entry."""
+    specs = []
+    for algo in args.algos:
+        path = config_file(args.set, algo)
+        if not path.is_file():
+            raise SystemExit(f"No hyperparameter file {path} for --algo {algo} in the '{args.set}' set")
+        entries = yaml.safe_load(path.read_text())
+        for env in args.envs:
+            if env not in entries:
+                known = sorted(key for key in entries if key not in ("default", "atari"))
+                raise SystemExit(f"{path} has no entry for {env}: {known}")
+            yaml_budget = int(float(entries[env]["n_timesteps"]))
+            n_timesteps = args.n_timesteps or yaml_budget
+            eval_freq = args.eval_freq or max(n_timesteps // args.n_evals, 1)
+            if eval_freq > n_timesteps:
+                raise SystemExit(f"--eval-freq {eval_freq} is above the budget of {env} ({n_timesteps}): no evaluation")
+            hyperparams = list(args.hyperparams)
+            # The paper's epsilon reaches its final value at a fixed timestep (exploration_fraction = 1919 / budget
+            # in the YAML): keep that timestep when the budget is overridden (the YAML's own instruction)
+            fraction = entries[env].get("exploration_fraction")
+            overridden = any(item.startswith("exploration_fraction:") for item in hyperparams)
+            if args.set != "tuned" and n_timesteps != yaml_budget and fraction is not None and not overridden:
+                hyperparams.append(f"exploration_fraction:{min(1.0, float(fraction) * yaml_budget / n_timesteps):.6g}")
+            for seed in args.seeds:
+                specs.append(
+                    {
+                        "set": args.set,
+                        "algo": algo,
+                        "env": env,
+                        "seed": seed,
+                        "n_timesteps": n_timesteps,
+                        "eval_freq": eval_freq,
+                        "eval_episodes": args.eval_episodes,
+                        "hyperparams": hyperparams,
+                        "device": args.device,
+                        "timeout": args.timeout,
+                    }
+                )
+    return specs
+
+
+def run_dir(root: Path, spec: dict) -> Path:
+    return root / spec["set"] / spec["algo"] / f"{spec['env']}_{spec['seed']}"
+
+
+def train_command(spec: dict, log_folder: str) -> list[str]:
+    """The ``python -m sb3_offon.train`` command of a run (without the interpreter)."""
+    command = ["-m", "sb3_offon.train", "--algo", spec["algo"], "--env", spec["env"], "--seed", str(spec["seed"])]
+    command += ["-f", log_folder, "-n", str(spec["n_timesteps"]), "--eval-freq", str(spec["eval_freq"])]
+    command += ["--eval-episodes", str(spec["eval_episodes"]), "--num-threads", "1", "--device", spec["device"]]
+    if spec["set"] != "tuned":  # tuned: the bundled {algo}.yml is sb3_offon.train's default
+        command += ["-conf", spec["set"]]
+    if spec["hyperparams"]:
+        command += ["--hyperparams", *spec["hyperparams"]]
+    return command
+
+
+# ----------------------------------------------------------------------------------------------------------------------
+# The task function: the same for the local pool and for Ray
+# ----------------------------------------------------------------------------------------------------------------------
+def run_one(spec: dict) -> dict:
+    """
+    Train one run in a fresh temporary folder and return its kept files.
+
+    :param spec: a run of :func:`build_specs`
+    :return: ``spec``, ``returncode`` (None when the command could not start or timed out), ``wall_time_s``,
+        ``started``/``finished`` (UTC, ISO 8601), ``host``, ``command`` and ``files`` (relative path -> bytes: the zoo's
+        run folder without models and replay buffers, plus ``train.log``, the tail of the output)
+    """
+    scratch = Path(tempfile.mkdtemp(prefix=f"offon_{spec['algo']}_{spec['env']}_{spec['seed']}_"))
+    command = train_command(spec, "logs")
+    # One thread per run, already at import time (torch.set_num_threads comes later, from --num-threads)
+    environment = {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+    started, start = datetime.now(timezone.utc), time.perf_counter()
+    returncode = None
+    with open(scratch / "train.log", "w") as log:
+        try:
+            returncode = subprocess.run(
+                [sys.executable, *command],
+                cwd=scratch,
+                stdout=log,
+                stderr=subprocess.STDOUT,
+                env=environment,
+                timeout=spec.get("timeout"),
+                check=False,
+            ).returncode
+        except (OSError, subprocess.TimeoutExpired) as error:
+            log.write(f"\n[benchmark] {type(error).__name__}: {error}\n")
+    wall_time = time.perf_counter() - start
+    files: dict[str, bytes] = {}
+    # The zoo writes logs/{algo}/{env}_1/ in the empty scratch folder
+    zoo_runs = sorted((scratch / "logs" / spec["algo"]).glob(f"{spec['env']}_*"))
+    if zoo_runs:
+        for path in sorted(zoo_runs[-1].rglob("*")):
+            if path.is_file() and (path.suffix in KEEP_SUFFIXES or path.name in KEEP_NAMES):
+                files[path.relative_to(zoo_runs[-1]).as_posix()] = path.read_bytes()
+    lines = (scratch / "train.log").read_text(errors="replace").splitlines()
+    files["train.log"] = ("\n".join(lines[-LOG_TAIL_LINES:]) + "\n").encode()
+    shutil.rmtree(scratch, ignore_errors=True)
+    return {
+        "spec": spec,
+        "returncode": returncode,
+        "wall_time_s": round(wall_time, 2),
+        "started": started.isoformat(timespec="seconds"),
+        "finished": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "host": socket.gethostname(),
+        "command": ["python", *command],
+        "files": files,
+    }
+
+
+# ----------------------------------------------------------------------------------------------------------------------
+# Resuming: which runs are finished
+# ----------------------------------------------------------------------------------------------------------------------
+def read_evaluations(folder: Path) -> dict[str, np.ndarray] | None:
+    try:
+        with np.load(folder / "evaluations.npz") as data:
+            return {key: data[key] for key in data.files}
+    except (OSError, ValueError, EOFError):
+        return None
+
+
+def run_status(folder: Path, spec: dict) -> str:
+    """``"todo"`` (no folder, or an unfinished one), ``"finished"``, or ``"conflict"`` (finished with other settings)."""
+    try:
+        record = json.loads((folder / DONE).read_text())
+    except (OSError, ValueError):
+        return "todo"
+    evaluations = read_evaluations(folder)
+    if (
+        record.get("returncode") != 0
+        or evaluations is None
+        or len(evaluations.get("timesteps", [])) != record.get("n_evaluations")
+        or len(evaluations.get("results", [])) != record.get("n_evaluations")
+        or not any(folder.glob("*monitor.csv"))
+    ):
+        return "todo"
+    same = all(record["spec"].get(key) == spec[key] for key in IDENTITY)
+    return "finished" if same else "conflict"
+
+
+def store(result: dict, root: Path) -> tuple[bool, str]:
+    """
+    Write a run's files into its folder, with ``done.json`` (or ``failed.json``) written last.
+
+    The files are written into a hidden sibling folder that replaces the run folder at the end, so that an interrupted
+    write never leaves a folder that looks finished.
+
+    :return: whether the run succeeded, and a one-line summary
+    """
+    spec, files = result["spec"], result["files"]
+    folder = run_dir(root, spec)
+    partial = folder.with_name(f".{folder.name}.partial")
+    shutil.rmtree(partial, ignore_errors=True)
+    for name, data in files.items():
+        (partial / name).parent.mkdir(parents=True, exist_ok=True)
+        (partial / name).write_bytes(data)
+    evaluations = read_evaluations(partial) if "evaluations.npz" in files else None
+    n_evaluations = 0 if evaluations is None else len(evaluations["timesteps"])
+    ok = result["returncode"] == 0 and n_evaluations > 0 and any(name.endswith("monitor.csv") for name in files)
+    record = {key: value for key, value in result.items() if key != "files"}
+    record.update(n_evaluations=n_evaluations, files=sorted(files), code_version=code_version())
+    if n_evaluations:
+        record["last_evaluation"] = {
+            "timestep": int(evaluations["timesteps"][-1]),
+            "mean_return": float(np.mean(evaluations["results"][-1])),
+        }
+    (partial / (DONE if ok else FAILED)).write_text(json.dumps(record, indent=2) + "\n")
+    shutil.rmtree(folder, ignore_errors=True)
+    partial.rename(folder)
+    name = f"{spec['algo']} {spec['env']} seed {spec['seed']}"
+    if ok:
+        last = record["last_evaluation"]["mean_return"]
+        return True, f"done   {name} in {result['wall_time_s']:.1f} s, last evaluation {last:.1f}"
+    reason = f"return code {result['returncode']}" if result["returncode"] != 0 else "no evaluation or monitor file"
+    tail = "\n    ".join(files["train.log"].decode(errors="replace").splitlines()[-15:])
+    return False, f"FAILED {name} ({reason}) after {result['wall_time_s']:.1f} s, see {folder / 'train.log'}:\n    {tail}"
+
+
+_CODE_VERSION: dict[str, str] = {}
+
+
+def code_version() -> dict[str, str]:
+    """The git commit of the code that made the results (with ``-dirty`` for uncommitted changes), once per driver."""
+    if not _CODE_VERSION:
+        repository = hyperparams_dir().parent.parent
+
+        def git(*command: str) -> str:
+            return subprocess.run(["git", *command], cwd=repository, capture_output=True, text=True).stdout.strip()
+
+        try:
+            commit = git("rev-parse", "HEAD")
+            dirty = git("status", "--porcelain", "--untracked-files=no")
+        except OSError:
+            commit, dirty = "", ""
+        _CODE_VERSION["commit"] = (commit + ("-dirty" if dirty else "")) if commit else "unknown"
+    return _CODE_VERSION
+
+
+# ----------------------------------------------------------------------------------------------------------------------
+# Executors: both yield the results of run_one as the runs finish
+# ----------------------------------------------------------------------------------------------------------------------
+def run_local(specs: list[dict], workers: int) -> Iterator[dict]:
+    """A pool of threads, each waiting on one training subprocess: the work itself is in the subprocesses."""
+    with concurrent.futures.ThreadPoolExecutor(max_workers=workers) as pool:
+        futures = [pool.submit(run_one, spec) for spec in specs]
+        try:
+            for future in concurrent.futures.as_completed(futures):
+                yield future.result()
+        finally:
+            for future in futures:
+                future.cancel()
+
+
+def run_ray(specs: list[dict], workers: int, address: str | None) -> Iterator[dict]:
+    """The same task function as a Ray task (1 CPU each), on a local Ray instance or on the cluster at ``address``."""
+    import ray
+
+    if address is None:
+        ray.init(num_cpus=workers, include_dashboard=False)
+    else:
+        ray.init(address=address)
+    # Imported as a module (``import benchmark``), run_one would be pickled by reference, and Ray's workers cannot
+    # import a script: send it by value. (Run as a script, ``__main__`` is always sent by value.)
+    if run_one.__module__ != "__main__":
+        ray.cloudpickle.register_pickle_by_value(sys.modules[run_one.__module__])
+    task = ray.remote(num_cpus=1, max_retries=0)(run_one)
+    pending = {task.remote(spec): spec for spec in specs}
+    try:
+        while pending:
+            ready, _ = ray.wait(list(pending), num_returns=1)
+            spec = pending.pop(ready[0])
+            try:
+                yield ray.get(ready[0])
+            except ray.exceptions.RayError as error:  # a lost worker or node: a failed run, redone next time
+                message = f"[benchmark] Ray task failed: {error}\n".encode()
+                yield {"spec": spec, "returncode": None, "wall_time_s": 0.0, "files": {"train.log": message}}
+    finally:
+        for ref in pending:
+            ray.cancel(ref, force=True)
+        ray.shutdown()
+
+
+# ----------------------------------------------------------------------------------------------------------------------
+# Main
+# ----------------------------------------------------------------------------------------------------------------------
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    specs = build_specs(args)
+    statuses = {id(spec): run_status(run_dir(args.root, spec), spec) for spec in specs}
+    conflicts = [spec for spec in specs if statuses[id(spec)] == "conflict"]
+    if conflicts and not args.force:
+        listing = "\n  ".join(str(run_dir(args.root, spec)) for spec in conflicts)
+        print(
+            f"{len(conflicts)} finished run(s) were made with other settings ({', '.join(IDENTITY)}):\n  {listing}\n"
+            "Use another --root, or --force to redo them.",
+            file=sys.stderr,
+        )
+        return 2
+    todo = [spec for spec in specs if statuses[id(spec)] != "finished"]
+    # Longest runs first: the grid ends sooner
+    todo.sort(key=lambda spec: -spec["n_timesteps"])
+    print(
+        f"{len(specs)} runs ({len(args.algos)} algos x {len(args.envs)} envs x {len(args.seeds)} seeds, '{args.set}' set) "
+        f"in {args.root / args.set}: {len(specs) - len(todo)} finished, {len(todo)} to run"
+        + (f" on Ray ({args.ray_address or f'local, {args.workers} CPUs'})" if args.ray else f" on {args.workers} workers")
+    )
+    if args.dry_run:
+        for spec in todo:
+            print(" ".join(["python", *train_command(spec, "<scratch>")]), "->", run_dir(args.root, spec))
+        return 0
+    if not todo:
+        return 0
+    # Unfinished folders (crashes, interrupted grids, deleted files) are redone from scratch
+    for spec in todo:
+        shutil.rmtree(run_dir(args.root, spec), ignore_errors=True)
+    results = run_ray(todo, args.workers, args.ray_address) if args.ray else run_local(todo, args.workers)
+    # The bar counts env steps (budgets), so that its ETA weighs long runs as such; the postfix counts runs
+    bar = tqdm(total=sum(spec["n_timesteps"] for spec in todo), unit="step", unit_scale=True, dynamic_ncols=True)
+    bar.set_postfix_str(f"0/{len(todo)} runs")
+    wall_times, failures = [], 0
+    with bar:
+        for n_done, result in enumerate(results, start=1):
+            ok, message = store(result, args.root)
+            failures += not ok
+            if ok:
+                wall_times.append(result["wall_time_s"])
+            bar.write(message)
+            bar.update(result["spec"]["n_timesteps"])
+            bar.set_postfix_str(f"{n_done}/{len(todo)} runs" + (f", {failures} failed" if failures else ""))
+    if wall_times:
+        print(
+            f"Wall time per run: min {min(wall_times):.1f} s, median {statistics.median(wall_times):.1f} s, "
+            f"max {max(wall_times):.1f} s ({len(wall_times)} runs)"
+        )
+    if failures:
+        print(f"{failures} run(s) failed; run the same command again to redo them", file=sys.stderr)
+    return 1 if failures else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

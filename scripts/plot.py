@@ -1,0 +1,546 @@
+"""
+Figures and tables of a benchmark written by ``scripts/benchmark.py``.
+
+Reads every finished run (``done.json``) under ``<root>/<set>/<algo>/<env>_<seed>/`` (the zoo's layout) and writes
+into ``--out`` (default ``results/<set>``):
+
+- ``curves_<env>.png``, one per env: evaluation return (deterministic policy, ``evaluations.npz``) against env steps,
+  mean over seeds with a 95% bootstrap confidence band, one line per variant (the paper's Figures 8, 10 and 12);
+- ``fall_penalty_average.png``, ``fall_penalty_best.png``, ``fall_penalty_worst.png`` (with CartPoleFallPenalty-v1
+  runs): the training score per episode (the episode length, i.e. the return without the -100, which is what the
+  paper's scripts counted and what the stop rule averages) of the average, best and worst seed, Figures 13-15;
+- ``goal_reaches.png`` (with MountainCarGoalBonus-v0 runs): the running count of training episodes that reached the
+  goal against env steps, from the monitor CSV's ``goal_reached`` column, Figure 16;
+- ``aggregate.png``: across envs, IQM of min-max normalised scores and probability of improvement over DQN;
+- ``table.md``: per env and algorithm, final return, area under the curve and env steps to the solve threshold, each
+  a mean over seeds with a 95% CI; the aggregates; the Section 4.4 measures.
+
+Definitions (per run; then mean over seeds with a 95% percentile stratified-bootstrap CI from rliable, seeded):
+
+- evaluation curve: the mean return of each evaluation, put on the env's common grid of evaluation steps (a run that
+  stopped early, e.g. by the CartPoleFallPenalty-v1 stop rule, keeps its last value: its policy no longer changes);
+- final return: the mean of the last ``--last`` evaluations;
+- AUC: the area under the evaluation curve divided by its span in env steps, i.e. the mean return over training;
+- steps to threshold: the first evaluation step whose mean return reaches the threshold (CartPole 475, MountainCar
+  -110, LunarLander 200, Acrobot -100; the registered ``reward_threshold`` for other envs); a run that never reaches
+  it counts as its budget (a lower bound), and the table says how many reached it;
+- aggregates (rliable): per env, final returns min-max normalised over all runs of all variants on that env; IQM over
+  runs x envs; probability of improvement P(X > DQN) averaged over envs. The Section 4.4 envs are left out of the
+  aggregates when other envs are present (their rewards were altered on purpose).
+
+Usage::
+
+    python scripts/plot.py --root results/raw --set paper --out results/paper
+"""
+
+import argparse
+import json
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+import pandas as pd
+from rliable import library as rly
+from rliable import metrics
+
+# arch (rliable's bootstrap) warns that ``random_state`` will change meaning; rliable passes it
+warnings.filterwarnings("ignore", category=FutureWarning, module="arch")
+
+ALGOS = ["offon_dqn", "dqn_mc", "dqn_sarsa", "dqn"]
+LABELS = {"offon_dqn": "Off-On DQN", "dqn_mc": "DQN with MC", "dqn_sarsa": "DQN with Sarsa", "dqn": "DQN"}
+COLORS = {"offon_dqn": "tab:red", "dqn_mc": "tab:green", "dqn_sarsa": "tab:orange", "dqn": "tab:blue"}
+BASELINE = "dqn"
+THRESHOLDS = {"CartPole-v1": 475.0, "MountainCar-v0": -110.0, "LunarLander-v3": 200.0, "Acrobot-v1": -100.0}
+PAPER_FIGURES = {"CartPole-v1": "Figure 8", "MountainCar-v0": "Figure 10", "LunarLander-v3": "Figure 12"}
+FALL_PENALTY, GOAL_BONUS = "CartPoleFallPenalty-v1", "MountainCarGoalBonus-v0"
+SECTION_44 = (FALL_PENALTY, GOAL_BONUS)
+# The stop rule of Section 4.4 (and of the YAML entries): mean length of the last 100 training episodes >= 490
+STOP_WINDOW, STOP_THRESHOLD = 100, 490.0
+
+
+def parse_args() -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--root", type=Path, default=Path("results/raw"), help="results root (default: results/raw)")
+    parser.add_argument("--set", default="paper", help="hyperparameter set, a folder of the root (default: paper)")
+    parser.add_argument("--out", type=Path, default=None, help="output folder (default: results/<set>)")
+    parser.add_argument("--last", type=int, default=3, help="evaluations averaged into the final return (default: 3)")
+    parser.add_argument("--reps", type=int, default=2000, help="bootstrap resamples (default: 2000)")
+    args = parser.parse_args()
+    args.out = args.out or Path("results") / args.set
+    return args
+
+
+# ----------------------------------------------------------------------------------------------------------------------
+# Loading the finished runs
+# ----------------------------------------------------------------------------------------------------------------------
+@dataclass
+class Run:
+    algo: str
+    env: str
+    seed: int
+    budget: int
+    timesteps: np.ndarray  # evaluation steps
+    returns: np.ndarray  # mean return of each evaluation
+    episodes: pd.DataFrame  # training episodes, in order: r, l, t (+ goal_reached)
+
+
+def load_run(folder: Path) -> Run | None:
+    """A finished run (as ``benchmark.py`` judges it), or None."""
+    record = json.loads((folder / "done.json").read_text())
+    try:
+        with np.load(folder / "evaluations.npz") as data:
+            timesteps, results = data["timesteps"], data["results"]
+    except (OSError, ValueError, KeyError):
+        return None
+    monitors = sorted(folder.glob("*monitor.csv"))
+    if record.get("returncode") != 0 or len(timesteps) != record.get("n_evaluations") or not monitors:
+        return None
+    # One file per training env; the first line is Monitor's JSON header. Episodes of all envs in time order.
+    episodes = pd.concat([pd.read_csv(path, skiprows=1) for path in monitors]).sort_values("t", kind="stable")
+    spec = record["spec"]
+    return Run(
+        algo=spec["algo"],
+        env=spec["env"],
+        seed=spec["seed"],
+        budget=spec["n_timesteps"],
+        timesteps=timesteps.astype(np.int64),
+        returns=results.mean(axis=1),
+        episodes=episodes.reset_index(drop=True),
+    )
+
+
+def load_runs(folder: Path) -> dict[str, dict[str, list[Run]]]:
+    """``runs[env][algo]``: the finished runs, by seed; envs and algos in a fixed order."""
+    runs: dict[str, dict[str, list[Run]]] = {}
+    for marker in sorted(folder.glob("*/*/done.json")):
+        run = load_run(marker.parent)
+        if run is None:
+            print(f"Skipped (unfinished): {marker.parent}")
+            continue
+        runs.setdefault(run.env, {}).setdefault(run.algo, []).append(run)
+    return {
+        env: {algo: sorted(by_algo[algo], key=lambda run: run.seed) for algo in sorted(by_algo, key=algo_order)}
+        for env, by_algo in sorted(runs.items())
+    }
+
+
+def algo_order(algo: str) -> tuple[int, str]:
+    return (ALGOS.index(algo) if algo in ALGOS else len(ALGOS), algo)
+
+
+def label(algo: str) -> str:
+    return LABELS.get(algo, algo)
+
+
+def threshold(env: str) -> float | None:
+    if env in THRESHOLDS:
+        return THRESHOLDS[env]
+    import gymnasium as gym
+
+    import sb3_offon.envs  # noqa: F401  (registers the Section 4.4 envs)
+
+    try:
+        return gym.spec(env).reward_threshold
+    except gym.error.Error:
+        return None
+
+
+# ----------------------------------------------------------------------------------------------------------------------
+# Statistics: means over seeds with rliable's stratified bootstrap
+# ----------------------------------------------------------------------------------------------------------------------
+def mean_ci(values: np.ndarray, reps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Mean over runs (axis 0) of ``values`` shaped (runs,) or (runs, T), with its 95% bootstrap CI (low, high)."""
+    scores = np.asarray(values, dtype=float).reshape(len(values), 1, -1)  # rliable's (runs, tasks, T)
+    point, interval = rly.get_interval_estimates(
+        {"x": scores}, lambda s: s.mean(axis=0)[0], reps=reps, random_state=np.random.RandomState(0)
+    )
+    return point["x"], interval["x"][0], interval["x"][1]
+
+
+def fast_probability_of_improvement(scores_x: np.ndarray, scores_y: np.ndarray) -> float:
+    """``metrics.probability_of_improvement`` (Mann-Whitney U / (n_x n_y), averaged over tasks), vectorised."""
+    greater = (scores_x[:, None, :] > scores_y[None, :, :]).mean(axis=(0, 1))
+    ties = (scores_x[:, None, :] == scores_y[None, :, :]).mean(axis=(0, 1))
+    return float(np.mean(greater + 0.5 * ties))
+
+
+def evaluation_curves(runs: list[Run]) -> tuple[np.ndarray, np.ndarray]:
+    """The env's common grid of evaluation steps and every run's curve on it, (runs, T); held after a run's end."""
+    grid = np.unique(np.concatenate([run.timesteps for run in runs]))
+    return grid, np.stack([np.interp(grid, run.timesteps, run.returns) for run in runs])
+
+
+def run_scores(runs: list[Run], grid: np.ndarray, curves: np.ndarray, last: int, solve_at: float | None) -> dict:
+    """Per-run final return, AUC, steps to threshold (budget when never reached) and whether it was reached."""
+    final = curves[:, -last:].mean(axis=1)
+    auc = np.trapezoid(curves, grid, axis=1) / (grid[-1] - grid[0]) if len(grid) > 1 else curves[:, 0]
+    steps, solved = np.array([run.budget for run in runs], dtype=float), np.zeros(len(runs), dtype=bool)
+    if solve_at is not None:
+        for index, curve in enumerate(curves):
+            reached = np.flatnonzero(curve >= solve_at)
+            if len(reached):
+                steps[index], solved[index] = grid[reached[0]], True
+    return {"final": final, "auc": auc, "steps": steps, "solved": solved}
+
+
+def fmt(values: np.ndarray, reps: int, digits: int = 1) -> str:
+    point, low, high = (float(part[0]) for part in mean_ci(values, reps))
+    return f"{point:,.{digits}f} [{low:,.{digits}f}, {high:,.{digits}f}]"
+
+
+# ----------------------------------------------------------------------------------------------------------------------
+# Figures
+# ----------------------------------------------------------------------------------------------------------------------
+def plot_band(ax: plt.Axes, x: np.ndarray, values: np.ndarray, algo: str, reps: int, text: str) -> None:
+    mean, low, high = mean_ci(values, reps)
+    ax.plot(x, mean, color=COLORS.get(algo), label=f"{label(algo)} ({text})")
+    ax.fill_between(x, low, high, color=COLORS.get(algo), alpha=0.2, linewidth=0)
+
+
+def save(fig: plt.Figure, path: Path, written: list[Path]) -> None:
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    written.append(path)
+
+
+def plot_curves(env: str, by_algo: dict[str, list[Run]], hyperparams_set: str, reps: int, out: Path, written: list) -> None:
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for algo, runs in by_algo.items():
+        grid, curves = evaluation_curves(runs)
+        plot_band(ax, grid, curves, algo, reps, f"{len(runs)} seed{'s' * (len(runs) > 1)}")
+    if threshold(env) is not None:
+        ax.axhline(threshold(env), color="grey", linestyle="--", linewidth=1, label=f"threshold {threshold(env):g}")
+    figure = f", as the paper's {PAPER_FIGURES[env]}" if env in PAPER_FIGURES else ""
+    ax.set(
+        title=f"{env}: '{hyperparams_set}' settings{figure}",
+        xlabel="Environment steps",
+        ylabel="Evaluation return (deterministic)",
+    )
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    save(fig, out / f"curves_{env}.png", written)
+
+
+def episodes_to_stop(lengths: np.ndarray) -> int | None:
+    """The number of episodes after which the stop rule holds (mean length of the last 100 >= 490), or None."""
+    if len(lengths) < STOP_WINDOW:
+        return None
+    windows = np.convolve(lengths, np.ones(STOP_WINDOW) / STOP_WINDOW, mode="valid")
+    hits = np.flatnonzero(windows >= STOP_THRESHOLD)
+    return int(hits[0]) + STOP_WINDOW if len(hits) else None
+
+
+def stop_point(run: Run) -> tuple[int, int, bool]:
+    """Episodes and env steps until the stop rule held (all of the run's when it never did), and whether it did."""
+    lengths = run.episodes["l"].to_numpy()
+    stop = episodes_to_stop(lengths.astype(float))
+    count = len(lengths) if stop is None else stop
+    return count, int(lengths[:count].sum()), stop is not None
+
+
+def rank_fall_penalty(runs: list[Run]) -> list[Run]:
+    """Best first: stopped sooner (fewer episodes), then, among runs never stopped, the higher mean of the last 100."""
+
+    def key(run: Run) -> tuple:
+        lengths = run.episodes["l"].to_numpy(dtype=float)
+        stop = episodes_to_stop(lengths)
+        return (0, stop) if stop is not None else (1, -float(np.mean(lengths[-STOP_WINDOW:])))
+
+    return sorted(runs, key=key)
+
+
+def plot_fall_penalty(by_algo: dict[str, list[Run]], reps: int, out: Path, written: list) -> None:
+    # Figure 13: mean over the seeds still training at each episode (runs end when the stop rule holds)
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for algo, runs in by_algo.items():
+        lengths = [run.episodes["l"].to_numpy(dtype=float) for run in runs]
+        padded = np.full((len(runs), max(map(len, lengths))), np.nan)
+        for index, values in enumerate(lengths):
+            padded[index, : len(values)] = values
+        mean, low, high = nan_mean_ci(padded, reps)
+        episodes = np.arange(1, padded.shape[1] + 1)
+        ax.plot(episodes, mean, color=COLORS.get(algo), label=f"{label(algo)} ({len(runs)} seeds)", linewidth=1)
+        ax.fill_between(episodes, low, high, color=COLORS.get(algo), alpha=0.2, linewidth=0)
+    decorate_fall_penalty(ax, "average over seeds (still training), as the paper's Figure 13")
+    save(fig, out / "fall_penalty_average.png", written)
+    # Figures 14 and 15: each variant's best and worst seed
+    for which, pick, figure in (("best", 0, "Figure 14"), ("worst", -1, "Figure 15")):
+        fig, ax = plt.subplots(figsize=(7, 4.5))
+        for algo, runs in by_algo.items():
+            run = rank_fall_penalty(runs)[pick]
+            lengths = run.episodes["l"].to_numpy(dtype=float)
+            stop = episodes_to_stop(lengths)
+            status = f"stopped after {stop} episodes" if stop is not None else f"not stopped in {len(lengths)} episodes"
+            ax.plot(
+                np.arange(1, len(lengths) + 1),
+                lengths,
+                color=COLORS.get(algo),
+                linewidth=1,
+                label=f"{label(algo)}: seed {run.seed}, {status}",
+            )
+        decorate_fall_penalty(ax, f"{which} seed of each variant, as the paper's {figure}")
+        save(fig, out / f"fall_penalty_{which}.png", written)
+
+
+def nan_mean_ci(values: np.ndarray, reps: int, chunk: int = 200) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """
+    Mean over runs (axis 0) ignoring NaN (runs that ended), with a 95% percentile bootstrap CI over runs.
+
+    rliable's bootstrap needs complete arrays; runs of different lengths are resampled here the same way (runs drawn
+    with replacement), each resample's mean taken over the runs still present.
+    """
+    generator = np.random.default_rng(0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns of a resample
+        samples = []
+        for start in range(0, reps, chunk):
+            draws = generator.integers(0, len(values), size=(min(chunk, reps - start), len(values)))
+            samples.append(np.nanmean(values[draws], axis=1))
+        low, high = np.nanpercentile(np.concatenate(samples), [2.5, 97.5], axis=0)
+        return np.nanmean(values, axis=0), low, high
+
+
+def decorate_fall_penalty(ax: plt.Axes, subtitle: str) -> None:
+    ax.axhline(STOP_THRESHOLD, color="grey", linestyle="--", linewidth=1, label=f"stop rule: mean of {STOP_WINDOW} ≥ 490")
+    ax.set(
+        title=f"{FALL_PENALTY}: {subtitle}",
+        xlabel="Training episode",
+        ylabel="Score (episode length, steps balanced)",
+    )
+    ax.legend(fontsize=7)
+    ax.grid(alpha=0.3)
+
+
+def goal_episodes(run: Run) -> np.ndarray:
+    """The env step at which each training episode that reached the goal ended (the monitor CSV's ``goal_reached``)."""
+    if "goal_reached" not in run.episodes:
+        raise SystemExit(f"{GOAL_BONUS} run without a goal_reached column in its monitor CSV: {run.algo} seed {run.seed}")
+    ends = run.episodes["l"].cumsum().to_numpy()
+    reached = run.episodes["goal_reached"].astype(str).str.strip().str.lower().isin(["true", "1", "1.0"]).to_numpy()
+    return ends[reached]
+
+
+def goal_counts(runs: list[Run], grid: np.ndarray) -> np.ndarray:
+    """(runs, T): the number of training episodes that reached the goal and ended by each step of ``grid``."""
+    return np.array([np.searchsorted(goal_episodes(run), grid, side="right") for run in runs], dtype=float)
+
+
+def plot_goal_reaches(by_algo: dict[str, list[Run]], reps: int, out: Path, written: list) -> None:
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    budget = max(run.budget for runs in by_algo.values() for run in runs)
+    grid = np.linspace(0, budget, 201)
+    for algo, runs in by_algo.items():
+        plot_band(ax, grid, goal_counts(runs, grid), algo, reps, f"{len(runs)} seed{'s' * (len(runs) > 1)}")
+    ax.set(
+        title=f"{GOAL_BONUS}: goal reaches during training, as the paper's Figure 16",
+        xlabel="Environment steps",
+        ylabel="Training episodes that reached the goal",
+    )
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    save(fig, out / "goal_reaches.png", written)
+
+
+# ----------------------------------------------------------------------------------------------------------------------
+# Aggregates across envs (rliable)
+# ----------------------------------------------------------------------------------------------------------------------
+def aggregates(runs: dict[str, dict[str, list[Run]]], scores: dict, reps: int) -> dict | None:
+    """IQM of min-max normalised final returns and AUC, and P(improvement over DQN), over the envs all variants ran."""
+    algos = sorted({algo for by_algo in runs.values() for algo in by_algo}, key=algo_order)
+    envs = [env for env in runs if all(algo in runs[env] for algo in algos)]
+    if any(env not in SECTION_44 for env in envs):
+        envs = [env for env in envs if env not in SECTION_44]
+    if not envs:
+        return None
+    # Per algo: (runs, tasks) on the seeds it has on every env
+    matrices: dict[str, dict[str, np.ndarray]] = {"final": {}, "auc": {}}
+    for measure in matrices:
+        lows = {env: min(scores[env][algo][measure].min() for algo in algos) for env in envs}
+        highs = {env: max(scores[env][algo][measure].max() for algo in algos) for env in envs}
+        for algo in algos:
+            seeds = sorted(set.intersection(*({run.seed for run in runs[env][algo]} for env in envs)))
+            columns = []
+            for env in envs:
+                by_seed = dict(zip((run.seed for run in runs[env][algo]), scores[env][algo][measure], strict=True))
+                span = highs[env] - lows[env]
+                columns.append([(by_seed[seed] - lows[env]) / span if span > 0 else 0.5 for seed in seeds])
+            matrices[measure][algo] = np.array(columns).T
+    result: dict = {"envs": envs, "algos": algos, "runs": {algo: len(matrices["final"][algo]) for algo in algos}}
+    for measure, matrix in matrices.items():
+        point, interval = rly.get_interval_estimates(
+            matrix,
+            lambda s: np.array([metrics.aggregate_iqm(s)]),
+            reps=reps,
+            random_state=np.random.RandomState(0),
+        )
+        result[f"iqm_{measure}"] = {algo: (point[algo][0], *interval[algo][:, 0]) for algo in algos}
+    if BASELINE in algos:
+        pairs = {algo: (matrices["final"][algo], matrices["final"][BASELINE]) for algo in algos if algo != BASELINE}
+        if pairs:
+            # rliable's metric is Mann-Whitney U per task (one SciPy test per resample and task): the same figure is
+            # computed vectorised inside rliable's bootstrap, and checked against rliable's own point estimate
+            point, interval = rly.get_interval_estimates(
+                pairs,
+                lambda x, y: np.array([fast_probability_of_improvement(x, y)]),
+                reps=reps,
+                random_state=np.random.RandomState(0),
+            )
+            for algo, (x, y) in pairs.items():
+                assert np.isclose(point[algo][0], metrics.probability_of_improvement(x, y))
+            result["poi"] = {algo: (point[algo][0], *interval[algo][:, 0]) for algo in pairs}
+    return result
+
+
+def plot_aggregates(result: dict, out: Path, written: list) -> None:
+    panels = [("iqm_final", "IQM of normalised final return"), ("iqm_auc", "IQM of normalised AUC")]
+    if "poi" in result:
+        panels.append(("poi", f"P(improvement over {label(BASELINE)})"))
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 0.6 * len(result["algos"]) + 1.6), squeeze=False)
+    for ax, (key, title) in zip(axes[0], panels, strict=True):
+        algos = list(result[key])
+        for row, algo in enumerate(algos):
+            point, low, high = result[key][algo]
+            ax.barh(row, high - low, left=low, color=COLORS.get(algo), alpha=0.6, height=0.6)
+            ax.plot([point, point], [row - 0.3, row + 0.3], color="black", linewidth=2)
+        ax.set_yticks(range(len(algos)), [label(algo) for algo in algos])
+        ax.set_title(title, fontsize=10)
+        ax.set_xlim(0, 1)
+        if key == "poi":
+            ax.axvline(0.5, color="grey", linestyle="--", linewidth=1)
+        ax.grid(axis="x", alpha=0.3)
+    fig.suptitle(f"Across {', '.join(result['envs'])} (95% bootstrap CIs)", fontsize=10)
+    save(fig, out / "aggregate.png", written)
+
+
+# ----------------------------------------------------------------------------------------------------------------------
+# Table
+# ----------------------------------------------------------------------------------------------------------------------
+def interval_text(values: tuple[float, float, float]) -> str:
+    return f"{values[0]:.2f} [{values[1]:.2f}, {values[2]:.2f}]"
+
+
+def write_table(args: argparse.Namespace, runs: dict, scores: dict, result: dict | None, written: list) -> None:
+    n_runs = sum(len(by_seed) for by_algo in runs.values() for by_seed in by_algo.values())
+    lines = [
+        f"# Benchmark results: `{args.set}` hyperparameters",
+        "",
+        f"From {n_runs} finished runs under `{args.root / args.set}` (`python scripts/plot.py --root {args.root} "
+        f"--set {args.set} --out {args.out}`). Means over seeds with 95% stratified-bootstrap confidence intervals "
+        f"(rliable, {args.reps} resamples). Returns are of the deterministic policy, evaluated periodically during training.",
+        "",
+        f"- **Final return**: mean of the last {args.last} evaluations.",
+        "- **AUC**: area under the evaluation curve divided by its span in env steps (the mean return over training).",
+        "- **Steps to threshold**: first evaluation step whose mean return reaches the threshold; a run that never "
+        "reaches it counts as its budget (so the mean is a lower bound), and *solved* says how many reached it.",
+        "",
+        "## Per environment and algorithm",
+        "",
+        "| Env | Algorithm | Seeds | Budget | Final return | AUC | Steps to threshold | Solved |",
+        "|---|---|---:|---:|---|---|---|---:|",
+    ]
+    for env, by_algo in runs.items():
+        solve_at = threshold(env)
+        env_text = f"{env} (≥ {solve_at:g})" if solve_at is not None else env
+        for algo, algo_runs in by_algo.items():
+            score = scores[env][algo]
+            budget = max(run.budget for run in algo_runs)
+            steps = fmt(score["steps"], args.reps, 0) if solve_at is not None else "—"
+            solved = f"{int(score['solved'].sum())}/{len(algo_runs)}" if solve_at is not None else "—"
+            lines.append(
+                f"| {env_text} | {label(algo)} | {len(algo_runs)} | {budget:,} | {fmt(score['final'], args.reps)} "
+                f"| {fmt(score['auc'], args.reps)} | {steps} | {solved} |"
+            )
+    if result is not None:
+        lines += [
+            "",
+            "## Across environments (rliable)",
+            "",
+            f"Envs: {', '.join(result['envs'])}. Per env, scores min-max normalised over all runs of all variants; "
+            "IQM over runs x envs (seeds present on every env); probability of improvement P(X > DQN) per env, "
+            "averaged over envs.",
+            "",
+            f"| Algorithm | Runs | IQM normalised final return | IQM normalised AUC | P(improvement over {label(BASELINE)}) |",
+            "|---|---:|---|---|---|",
+        ]
+        for algo in result["algos"]:
+            poi = interval_text(result["poi"][algo]) if algo in result.get("poi", {}) else "—"
+            lines.append(
+                f"| {label(algo)} | {result['runs'][algo]} | {interval_text(result['iqm_final'][algo])} "
+                f"| {interval_text(result['iqm_auc'][algo])} | {poi} |"
+            )
+    if FALL_PENALTY in runs:
+        lines += [
+            "",
+            f"## Section 4.4: {FALL_PENALTY}",
+            "",
+            f"Training stops once the mean length of the last {STOP_WINDOW} training episodes reaches {STOP_THRESHOLD:g}. "
+            "A run that never stops counts with all its episodes and steps (lower bounds).",
+            "",
+            "| Algorithm | Seeds | Episodes to stop | Env steps to stop | Stopped |",
+            "|---|---:|---|---|---:|",
+        ]
+        for algo, algo_runs in runs[FALL_PENALTY].items():
+            episodes, steps, stopped = np.array([stop_point(run) for run in algo_runs], dtype=float).T
+            lines.append(
+                f"| {label(algo)} | {len(algo_runs)} | {fmt(episodes, args.reps, 0)} | {fmt(steps, args.reps, 0)} "
+                f"| {int(stopped.sum())}/{len(algo_runs)} |"
+            )
+    if GOAL_BONUS in runs:
+        lines += [
+            "",
+            f"## Section 4.4: {GOAL_BONUS}",
+            "",
+            "Training episodes that reached the goal (the monitor CSV's `goal_reached`), over the whole run.",
+            "",
+            "| Algorithm | Seeds | Goal reaches | Training episodes | First goal (env step) |",
+            "|---|---:|---|---|---|",
+        ]
+        for algo, algo_runs in runs[GOAL_BONUS].items():
+            totals = goal_counts(algo_runs, np.array([np.inf]))[:, 0]
+            episodes = np.array([len(run.episodes) for run in algo_runs], dtype=float)
+            firsts = np.array([(goal_episodes(run)[:1].tolist() or [np.nan])[0] for run in algo_runs], dtype=float)
+            first_text = fmt(firsts, args.reps, 0) if not np.isnan(firsts).any() else "not reached by every seed"
+            lines.append(
+                f"| {label(algo)} | {len(algo_runs)} | {fmt(totals, args.reps)} | {fmt(episodes, args.reps)} | {first_text} |"
+            )
+    path = args.out / "table.md"
+    path.write_text("\n".join(lines) + "\n")
+    written.append(path)
+
+
+# ----------------------------------------------------------------------------------------------------------------------
+# Main
+# ----------------------------------------------------------------------------------------------------------------------
+def main() -> None:
+    args = parse_args()
+    runs = load_runs(args.root / args.set)
+    if not runs:
+        raise SystemExit(f"No finished run under {args.root / args.set}")
+    args.out.mkdir(parents=True, exist_ok=True)
+    written: list[Path] = []
+    scores: dict[str, dict[str, dict]] = {}
+    for env, by_algo in runs.items():
+        plot_curves(env, by_algo, args.set, args.reps, args.out, written)
+        scores[env] = {}
+        for algo, algo_runs in by_algo.items():
+            grid, curves = evaluation_curves(algo_runs)
+            scores[env][algo] = run_scores(algo_runs, grid, curves, args.last, threshold(env))
+    if FALL_PENALTY in runs:
+        plot_fall_penalty(runs[FALL_PENALTY], args.reps, args.out, written)
+    if GOAL_BONUS in runs:
+        plot_goal_reaches(runs[GOAL_BONUS], args.reps, args.out, written)
+    result = aggregates(runs, scores, args.reps)
+    if result is not None:
+        plot_aggregates(result, args.out, written)
+    write_table(args, runs, scores, result, written)
+    print("Wrote:\n  " + "\n  ".join(str(path) for path in written))
+
+
+if __name__ == "__main__":
+    main()

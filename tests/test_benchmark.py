@@ -1,0 +1,128 @@
+"""
+``scripts/benchmark.py`` and ``scripts/plot.py`` end to end, on a tiny grid (2 algorithms x 1 env x 2 seeds x 300 steps).
+
+The runner is run as a command, with the local pool and with a local Ray instance; it is then resumed after one run's
+output is deleted, and ``plot.py`` draws every figure and table from the result (with a one-seed grid of the two
+Section 4.4 tasks added, for their figures). Each training run costs ~12 s of CPU, mostly the interpreter's imports.
+"""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+SCRIPTS = Path(__file__).resolve().parents[1] / "scripts"
+ALGOS = ["offon_dqn", "dqn"]
+SEEDS = [0, 1]
+ENV = "CartPole-v1"
+SECTION_44 = ["CartPoleFallPenalty-v1", "MountainCarGoalBonus-v0"]
+GRID = ["--set", "paper", "--algos", *ALGOS, "-n", "300", "--eval-freq", "100", "--eval-episodes", "2", "--workers", "2"]
+TIMEOUT = 900
+
+
+def benchmark(root: Path, *arguments: str) -> subprocess.CompletedProcess:
+    command = [sys.executable, str(SCRIPTS / "benchmark.py"), *GRID, "--root", str(root), *arguments]
+    return subprocess.run(command, capture_output=True, text=True, timeout=TIMEOUT)
+
+
+def check(result: subprocess.CompletedProcess) -> str:
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-5000:]
+    return result.stdout
+
+
+def run_folders(root: Path) -> list[Path]:
+    return [root / "paper" / algo / f"{ENV}_{seed}" for algo in ALGOS for seed in SEEDS]
+
+
+def evaluations(folder: Path) -> dict[str, np.ndarray]:
+    with np.load(folder / "evaluations.npz") as data:
+        return {key: data[key] for key in data.files}
+
+
+@pytest.fixture(scope="module")
+def local_root(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    root = tmp_path_factory.mktemp("local") / "raw"
+    output = check(benchmark(root, "--envs", ENV, "--seeds", "2"))
+    assert "4 to run" in output
+    return root
+
+
+def test_dry_run_of_the_tuned_set(tmp_path: Path):
+    output = check(benchmark(tmp_path, "--set", "tuned", "--dry-run", "--seeds", "3"))
+    commands = [line for line in output.splitlines() if "sb3_offon.train" in line]
+    # 2 algos x the tuned set's 4 envs x 3 seeds; tuned is sb3_offon.train's default file: no -conf
+    assert len(commands) == 24
+    assert all("-conf" not in line and "--num-threads 1" in line for line in commands)
+    assert not (tmp_path / "tuned").exists()
+
+
+def test_local_pool_writes_the_zoo_layout(local_root: Path):
+    for folder in run_folders(local_root):
+        done = json.loads((folder / "done.json").read_text())
+        assert done["returncode"] == 0 and done["wall_time_s"] > 0
+        # The paper's epsilon schedule keeps its end step (1919) under the 300-step budget: the whole run
+        assert done["spec"]["hyperparams"] == ["exploration_fraction:1"]
+        data = evaluations(folder)
+        np.testing.assert_array_equal(data["timesteps"], [100, 200, 300])
+        assert data["results"].shape == (3, 2) and done["n_evaluations"] == 3
+        assert (folder / "0.monitor.csv").is_file() and (folder / ENV / "config.yml").is_file()
+        assert "-conf paper" in (folder / ENV / "command.txt").read_text()
+        # Small files only: no model zips, no replay buffers
+        assert not [path for path in folder.rglob("*") if path.suffix in (".zip", ".pkl")]
+
+
+def test_resume_redoes_only_the_unfinished_run(local_root: Path):
+    folders = run_folders(local_root)
+    mtimes = {folder: (folder / "done.json").stat().st_mtime_ns for folder in folders}
+    before = evaluations(folders[1])
+    # Everything finished: nothing runs
+    assert "0 to run" in check(benchmark(local_root, "--envs", ENV, "--seeds", "2"))
+    assert mtimes == {folder: (folder / "done.json").stat().st_mtime_ns for folder in folders}
+    # Other settings than the finished runs': refused, nothing touched
+    refused = benchmark(local_root, "--envs", ENV, "--seeds", "2", "--eval-episodes", "3")
+    assert refused.returncode == 2 and "--force" in refused.stderr
+    # One run's output deleted (as a crash would leave it): that run only is wiped and redone
+    (folders[1] / "evaluations.npz").unlink()
+    (folders[1] / "stale.txt").write_text("left by a crashed run")
+    assert "1 to run" in check(benchmark(local_root, "--envs", ENV, "--seeds", "2"))
+    for folder in folders:
+        changed = (folder / "done.json").stat().st_mtime_ns != mtimes[folder]
+        assert changed == (folder == folders[1])
+    assert not (folders[1] / "stale.txt").exists()
+    # Same seed, same command: the same evaluations
+    for key, values in before.items():
+        np.testing.assert_array_equal(evaluations(folders[1])[key], values)
+
+
+def test_ray_runs_the_same_task(local_root: Path, tmp_path: Path):
+    pytest.importorskip("ray")
+    root = tmp_path / "raw"
+    output = check(benchmark(root, "--envs", ENV, "--seeds", "2", "--ray"))
+    assert "on Ray (local, 2 CPUs)" in output
+    for ray_folder, local_folder in zip(run_folders(root), run_folders(local_root), strict=True):
+        assert json.loads((ray_folder / "done.json").read_text())["returncode"] == 0
+        for key, values in evaluations(local_folder).items():
+            np.testing.assert_array_equal(evaluations(ray_folder)[key], values)
+
+
+def test_plot_writes_every_figure_and_table(local_root: Path, tmp_path: Path):
+    # The Section 4.4 tasks, one seed, for Figures 13-16
+    check(benchmark(local_root, "--envs", *SECTION_44, "--seeds", "1"))
+    out = tmp_path / "figures"
+    command = [sys.executable, str(SCRIPTS / "plot.py"), "--root", str(local_root), "--set", "paper", "--out", str(out)]
+    check(subprocess.run(command, capture_output=True, text=True, timeout=TIMEOUT))
+    expected = [f"curves_{env}.png" for env in [ENV, *SECTION_44]]
+    expected += ["fall_penalty_average.png", "fall_penalty_best.png", "fall_penalty_worst.png", "goal_reaches.png"]
+    expected += ["aggregate.png", "table.md"]
+    for name in expected:
+        assert (out / name).is_file() and (out / name).stat().st_size > 0, name
+    table = (out / "table.md").read_text()
+    rows = [line for line in table.splitlines() if line.startswith("| ") and "(≥" in line]
+    for env in [ENV, *SECTION_44]:
+        for label in ["Off-On DQN", "DQN"]:
+            assert sum(f"| {env} (≥" in row and f"| {label} |" in row for row in rows) == 1, (env, label)
+    assert "## Across environments (rliable)" in table and "P(improvement over DQN)" in table
+    assert "## Section 4.4: CartPoleFallPenalty-v1" in table and "## Section 4.4: MountainCarGoalBonus-v0" in table

@@ -1,0 +1,219 @@
+"""
+``python -m sb3_offon.train`` / ``python -m sb3_offon.enjoy`` end to end, in a temporary folder.
+
+The commands are launched in parallel subprocesses (one torch thread each) and shared by the tests of this module:
+most of their time is the interpreter's start, which parallelises well.
+"""
+
+import csv
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import optuna
+import pytest
+import yaml
+from rl_zoo3.utils import ALGOS
+
+from sb3_offon import OffOnDQN
+from sb3_offon.enjoy import ReplayLoader
+from sb3_offon.enjoy import main as enjoy_main
+from sb3_offon.zoo import HYPERPARAMS_DIR, register
+
+# Ours and SB3's DQN, all from the zoo's table
+register()
+ALGORITHMS = ["offon_dqn", "dqn_mc", "dqn_sarsa", "dqn"]
+N_STEPS = 300
+TIMEOUT = 600
+# Learning starts within the run so that the training code runs too; a few gradient steps per 64 env steps
+SHORT = ["learning_starts:100", "train_freq:64", "gradient_steps:4"]
+COMMON = ["--num-threads", "1", "--seed", "0", "-f", "logs"]
+
+
+def journal(folder: Path) -> optuna.storages.JournalStorage:
+    return optuna.storages.JournalStorage(optuna.storages.journal.JournalFileBackend(str(folder / "study.log")))
+
+
+def run_all(commands: dict[str, list[str]], cwd: Path) -> dict[str, subprocess.CompletedProcess]:
+    """Run ``python -m ...`` commands in parallel; their completed processes, output and errors merged."""
+    processes = {
+        name: subprocess.Popen(
+            [sys.executable, "-m", *command], cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+        )
+        for name, command in commands.items()
+    }
+    results = {}
+    for name, process in processes.items():
+        output, _ = process.communicate(timeout=TIMEOUT)
+        results[name] = subprocess.CompletedProcess(process.args, process.returncode, output)
+    return results
+
+
+def check(result: subprocess.CompletedProcess) -> str:
+    assert result.returncode == 0, result.stdout[-5000:]
+    return result.stdout
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, subprocess.CompletedProcess]]:
+    """Short trainings of every algorithm, the two paper tasks, and two tuners sharing one Optuna study."""
+    folder = tmp_path_factory.mktemp("cli")
+    train = ["sb3_offon.train", "--env", "CartPole-v1", "-n", str(N_STEPS), *COMMON]
+    commands = {
+        algo: [
+            *train,
+            "--algo",
+            algo,
+            "--eval-freq",
+            "150",
+            "--eval-episodes",
+            "2",
+            "--save-freq",
+            "150",
+            "--tensorboard-log",
+            "tb",
+            "--progress",
+            "--hyperparams",
+            *SHORT,
+        ]
+        for algo in ALGORITHMS
+    }
+    # Environments rebuilt by name in SubprocVecEnv workers: only the registration in sb3_offon.envs makes that work
+    commands["fall_penalty"] = [
+        *["sb3_offon.train", "--algo", "offon_dqn", "--env", "CartPoleFallPenalty-v1", "-n", str(N_STEPS), *COMMON],
+        *["--eval-freq", "-1", "--vec-env", "subproc", "--hyperparams", *SHORT, "n_envs:2"],
+    ]
+    commands["goal_bonus"] = [
+        *["sb3_offon.train", "--algo", "dqn_mc", "--env", "MountainCarGoalBonus-v0", "-n", "450", *COMMON],
+        *["--eval-freq", "-1", "--log-interval", "1", "--hyperparams", *SHORT],
+    ]
+    # Tuning into a shared Optuna storage (a journal file here; any machine that sees the file, or an RDB URL, can
+    # join), into a study another worker already added a trial to: the distributed tuning path
+    study = optuna.create_study(storage=journal(folder), study_name="cli", direction="maximize")
+    study.add_trial(optuna.trial.create_trial(value=0.0))
+    commands["optimize"] = [
+        *["sb3_offon.train", "--algo", "offon_dqn", "--env", "CartPole-v1", "-n", str(N_STEPS), "-f", "tune"],
+        *["--num-threads", "1", "--seed", "0", "-optimize", "--n-trials", "2", "--no-optim-plots"],
+        *["--storage", "study.log", "--study-name", "cli", "--eval-episodes", "2"],
+        # No pruning before 3 trials are done: every trial reports a value
+        *["--n-startup-trials", "3", "--hyperparams", "learning_starts:100"],
+    ]
+    return folder, run_all(commands, folder)
+
+
+ENJOY = ["--env", "CartPole-v1", "-f", "logs", "--no-render", "-n", "600", "--num-threads", "1"]
+
+
+@pytest.fixture(scope="module")
+def enjoy_cli(runs: tuple[Path, dict]) -> subprocess.CompletedProcess:
+    folder, _ = runs
+    # 600 steps: more than one CartPole episode (500 steps at most), so at least one ends
+    return run_all({"enjoy": ["sb3_offon.enjoy", *ENJOY, "--algo", "offon_dqn"]}, folder)["enjoy"]
+
+
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_train_writes_the_zoo_layout(runs: tuple[Path, dict], algo: str) -> None:
+    folder, results = runs
+    check(results[algo])
+    run = folder / "logs" / algo / "CartPole-v1_1"
+    for name in ("CartPole-v1.zip", "best_model.zip", "rl_model_150_steps.zip", "rl_model_300_steps.zip", "0.monitor.csv"):
+        assert (run / name).is_file(), name
+    evaluations = np.load(run / "evaluations.npz")
+    assert evaluations["timesteps"].tolist() == [150, 300]
+    assert evaluations["results"].shape == (2, 2)
+    assert any((folder / "tb" / "CartPole-v1").rglob("events.out.tfevents.*"))
+
+    config = dict(yaml.load((run / "CartPole-v1" / "config.yml").read_text(), Loader=yaml.UnsafeLoader))
+    args = dict(yaml.load((run / "CartPole-v1" / "args.yml").read_text(), Loader=yaml.UnsafeLoader))
+    # No -conf: the bundled file (for SB3's dqn too), with the command line's overrides on top
+    assert args["conf_file"] == str(HYPERPARAMS_DIR / f"{algo}.yml")
+    expected = dict(yaml.safe_load((HYPERPARAMS_DIR / f"{algo}.yml").read_text())["CartPole-v1"])
+    expected.update(learning_starts=100, train_freq=64, gradient_steps=4)
+    assert config == expected
+
+
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_saved_model_keeps_its_class_and_targets(runs: tuple[Path, dict], algo: str) -> None:
+    folder, results = runs
+    check(results[algo])
+    path = folder / "logs" / algo / "CartPole-v1_1" / "CartPole-v1.zip"
+    model = ALGOS[algo].load(path, device="cpu")
+    assert type(model) is ALGOS[algo]
+    assert model.learning_starts == 100
+    if algo != "dqn":
+        # The variants' defaults do not override what was saved
+        expected = {"offon_dqn": (0.99, 0.99), "dqn_mc": (0.99, 1.0), "dqn_sarsa": (0.0, 0.99)}[algo]
+        assert (model.mc_initial_prob, model.qlearning_initial_prob) == expected
+        assert model._n_updates > 0
+
+
+def test_enjoy_cli(enjoy_cli: subprocess.CompletedProcess) -> None:
+    output = check(enjoy_cli)
+    assert "Loading logs/offon_dqn/CartPole-v1_1/CartPole-v1.zip" in output
+    assert "Episode Reward" in output
+
+
+@pytest.mark.parametrize("algo", ["dqn_mc", "dqn_sarsa", "dqn"])
+def test_enjoy(runs: tuple[Path, dict], algo: str, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture) -> None:
+    """The same entry point as ``python -m sb3_offon.enjoy``, in this process: it saves the interpreter's start."""
+    folder, results = runs
+    check(results[algo])
+    monkeypatch.chdir(folder)
+    monkeypatch.setattr(sys, "argv", ["enjoy", *ENJOY, "--algo", algo])
+    enjoy_main()
+    output = capsys.readouterr().out
+    assert f"Loading logs/{algo}/CartPole-v1_1/CartPole-v1.zip" in output
+    assert "Episode Reward" in output
+
+
+def test_replay_loader_shrinks_the_buffer(runs: tuple[Path, dict]) -> None:
+    folder, results = runs
+    check(results["offon_dqn"])
+    model = ReplayLoader(OffOnDQN).load(folder / "logs" / "offon_dqn" / "CartPole-v1_1" / "CartPole-v1.zip", device="cpu")
+    assert model.replay_buffer.buffer_size == 1
+
+
+def test_fall_penalty_task_with_subprocess_envs(runs: tuple[Path, dict]) -> None:
+    folder, results = runs
+    check(results["fall_penalty"])
+    run = folder / "logs" / "offon_dqn" / "CartPoleFallPenalty-v1_1"
+    assert (run / "CartPoleFallPenalty-v1.zip").is_file()
+    n_episodes = 0
+    for env_index in range(2):
+        with open(run / f"{env_index}.monitor.csv") as file:
+            next(file)  # the Monitor's JSON header
+            for row in csv.DictReader(file):
+                # Every early episode falls: +1 per step, and -100 instead of the last +1
+                length = int(row["l"])
+                assert length < 500
+                assert float(row["r"]) == pytest.approx(length - 1 - 100)
+                n_episodes += 1
+    assert n_episodes > 0
+
+
+def test_goal_bonus_task_logs_goal_count(runs: tuple[Path, dict]) -> None:
+    folder, results = runs
+    output = check(results["goal_bonus"])
+    # One log dump per episode (--log-interval 1): two episodes of 200 steps within 450 steps. An untrained agent
+    # does not reach the goal in 200 steps: the count stays at 0
+    assert len(re.findall(r"\|\s+goal_reached\s+\|\s+0\s+\|", output)) == 2
+    with open(folder / "logs" / "dqn_mc" / "MountainCarGoalBonus-v0_1" / "0.monitor.csv") as file:
+        next(file)
+        rows = list(csv.DictReader(file))
+    # -1 each step, and the goal flag in the monitor CSV
+    assert [(float(row["r"]), int(row["l"]), row["goal_reached"]) for row in rows] == [(-200.0, 200, "False")] * 2
+
+
+def test_optimize_shares_one_study(runs: tuple[Path, dict]) -> None:
+    folder, results = runs
+    check(results["optimize"])
+    study = optuna.load_study(study_name="cli", storage=journal(folder))
+    assert len(study.trials) == 3
+    assert all(trial.state == optuna.trial.TrialState.COMPLETE for trial in study.trials)
+    for trial in study.trials[1:]:
+        assert {"learning_rate", "mc_initial_prob", "qlearning_initial_prob", "mc_mixing", "sarsa_target", "loss"} <= set(
+            trial.params
+        )
+    assert list((folder / "tune" / "offon_dqn").glob("report_CartPole-v1_2-trials-300-tpe-median_*.csv"))

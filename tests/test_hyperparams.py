@@ -1,0 +1,192 @@
+"""The bundled hyperparameter files, the choice of file, and the Optuna samplers."""
+
+import argparse
+import importlib.util
+from pathlib import Path
+from typing import Any
+
+import optuna
+import pytest
+import rl_zoo3
+import yaml
+from rl_zoo3.exp_manager import ExperimentManager
+from rl_zoo3.hyperparams_opt import HYPERPARAMS_CONVERTER, HYPERPARAMS_SAMPLER
+from stable_baselines3 import DQN
+
+from sb3_offon import OffOnDQN
+from sb3_offon.callbacks import GoalCountCallback, StopOnMeanTrainingReward
+from sb3_offon.variants import DQNMC, DQNSarsa
+from sb3_offon.zoo import ALGOS, HYPERPARAMS_DIR, SAMPLERS, register, resolve_config
+
+register()
+
+CLASSES = {"offon_dqn": OffOnDQN, "dqn_mc": DQNMC, "dqn_sarsa": DQNSarsa, "dqn": DQN}
+REQUIRED_ENVS = {
+    "CartPole-v1",
+    "MountainCar-v0",
+    "LunarLander-v3",
+    "Acrobot-v1",
+    "atari",
+    "CartPoleFallPenalty-v1",
+    "MountainCarGoalBonus-v0",
+}
+PAPER_ENVS = {
+    "CartPole-v0",
+    "CartPole-v1",
+    "MountainCar-v0",
+    "LunarLander-v3",
+    "CartPoleFallPenalty-v1",
+    "MountainCarGoalBonus-v0",
+}
+TARGET_KEYS = {
+    "mc_initial_prob",
+    "mc_final_prob",
+    "mc_fraction",
+    "qlearning_initial_prob",
+    "qlearning_final_prob",
+    "qlearning_fraction",
+    "mc_mixing",
+    "sarsa_target",
+    "mc_truncation",
+    "loss",
+}
+# Environments no entry names, to build the ``default`` entries with
+UNLISTED_ENV = "CartPole-v0"
+HAS_ALE = importlib.util.find_spec("ale_py") is not None
+
+
+def load(path: Path) -> dict[str, Any]:
+    with open(path) as file:
+        return yaml.safe_load(file)
+
+
+def entries() -> list[tuple[str, str, str]]:
+    """Every (file set, algo, entry) pair: the main files and the paper's."""
+    pairs = []
+    for folder, name in ((HYPERPARAMS_DIR, "main"), (HYPERPARAMS_DIR / "paper", "paper")):
+        for algo in CLASSES:
+            pairs += [(name, algo, entry) for entry in load(folder / f"{algo}.yml")]
+    return pairs
+
+
+@pytest.mark.parametrize("folder", [HYPERPARAMS_DIR, HYPERPARAMS_DIR / "paper"])
+def test_every_algorithm_has_its_entries(folder: Path) -> None:
+    assert sorted(path.stem for path in folder.glob("*.yml")) == sorted(CLASSES)
+    for algo in CLASSES:
+        assert set(load(folder / f"{algo}.yml")) >= (REQUIRED_ENVS if folder == HYPERPARAMS_DIR else PAPER_ENVS), algo
+
+
+@pytest.mark.parametrize("algo", ["offon_dqn", "dqn_mc", "dqn_sarsa"])
+def test_variants_share_the_dqn_settings(algo: str) -> None:
+    """Apart from the target options, each entry is the `dqn` one: the comparison is like for like."""
+    for folder in (HYPERPARAMS_DIR, HYPERPARAMS_DIR / "paper"):
+        baseline = load(folder / "dqn.yml")
+        for env_id, entry in load(folder / f"{algo}.yml").items():
+            assert {key: value for key, value in entry.items() if key not in TARGET_KEYS} == baseline[env_id], env_id
+
+
+def test_dqn_file_copies_the_zoo() -> None:
+    zoo = load(Path(rl_zoo3.__file__).parent / "hyperparams" / "dqn.yml")
+    ours = load(HYPERPARAMS_DIR / "dqn.yml")
+    for env_id in REQUIRED_ENVS & set(zoo):
+        assert ours[env_id] == zoo[env_id], env_id
+    assert ours["default"] == zoo["default"]
+
+
+@pytest.mark.parametrize(
+    "algo, expected",
+    [
+        ("offon_dqn", dict(mc_initial_prob=0.99, mc_final_prob=0.01, qlearning_initial_prob=0.99, qlearning_final_prob=0.01)),
+        ("dqn_mc", dict(mc_initial_prob=0.99, mc_final_prob=0.01, qlearning_initial_prob=1.0, qlearning_final_prob=1.0)),
+        ("dqn_sarsa", dict(mc_initial_prob=0.0, mc_final_prob=0.0, qlearning_initial_prob=0.99, qlearning_final_prob=0.01)),
+    ],
+)
+def test_paper_delta_settings(algo: str, expected: dict[str, float]) -> None:
+    for folder, loss in ((HYPERPARAMS_DIR, "huber"), (HYPERPARAMS_DIR / "paper", "mse")):
+        for env_id, entry in load(folder / f"{algo}.yml").items():
+            assert {key: entry[key] for key in expected} == expected, (folder, env_id)
+            assert entry["loss"] == loss
+
+
+def test_paper_settings() -> None:
+    for algo in CLASSES:
+        for env_id, entry in load(HYPERPARAMS_DIR / "paper" / f"{algo}.yml").items():
+            assert entry["policy_kwargs"] == "dict(net_arch=[24, 24], activation_fn=nn.ReLU)"
+            assert (entry["gamma"], entry["learning_rate"], entry["batch_size"]) == (0.95, 1e-3, 64)
+            assert entry["target_update_interval"] == 300
+            assert (entry["exploration_initial_eps"], entry["exploration_final_eps"]) == (1.0, 0.01)
+            # Epsilon reaches its floor when the paper's 0.995-per-training-step decay does: 1000 + 919 steps
+            assert entry["exploration_fraction"] * entry["n_timesteps"] == pytest.approx(1919, abs=1), (algo, env_id)
+
+
+def test_resolve_config() -> None:
+    assert resolve_config("offon_dqn", None) == str(HYPERPARAMS_DIR / "offon_dqn.yml")
+    # SB3's DQN reads our copy of the zoo's entries, any other zoo algorithm the zoo's own file
+    assert resolve_config("dqn", None) == str(HYPERPARAMS_DIR / "dqn.yml")
+    assert resolve_config("ppo", None) is None
+    assert resolve_config("dqn_mc", "paper") == str(HYPERPARAMS_DIR / "paper" / "dqn_mc.yml")
+    assert resolve_config("dqn_mc", "my/own.yml") == "my/own.yml"
+    assert resolve_config("dqn_mc", "my_package.hyperparams") == "my_package.hyperparams"
+    assert resolve_config("dqn_mc", "paper/dqn.yml") == "paper/dqn.yml"
+    assert resolve_config("dqn_mc", "papers") == "papers"
+    with pytest.raises(FileNotFoundError, match="ppo"):
+        resolve_config("ppo", "paper")
+
+
+def build(algo: str, env_id: str, config: Path, log_folder: Path) -> tuple[Any, ExperimentManager]:
+    """Build the model of one YAML entry the way ``python -m sb3_offon.train`` does (no training)."""
+    args = argparse.Namespace(algo=algo, env=env_id, conf_file=str(config))
+    manager = ExperimentManager(args, algo, env_id, str(log_folder), eval_freq=-1, config=str(config), device="cpu")
+    results = manager.setup_experiment()
+    assert results is not None
+    return results[0], manager
+
+
+@pytest.mark.parametrize("file_set, algo, entry", entries())
+def test_every_entry_builds_a_model(tmp_path: Path, file_set: str, algo: str, entry: str) -> None:
+    if entry == "atari":
+        if not HAS_ALE:
+            pytest.skip("ale-py is not installed")
+        env_id = "BreakoutNoFrameskip-v4"
+    else:
+        env_id = UNLISTED_ENV if entry == "default" else entry
+    config = HYPERPARAMS_DIR / ("paper" if file_set == "paper" else "") / f"{algo}.yml"
+    model, manager = build(algo, env_id, config, tmp_path)
+    try:
+        assert type(model) is CLASSES[algo]
+        values = load(config)[entry]
+        for key in TARGET_KEYS & set(values):
+            assert getattr(model, key) == values[key], key
+        assert model.gamma == values.get("gamma", 0.99)
+        if env_id == "CartPoleFallPenalty-v1":
+            (callback,) = manager.callbacks
+            assert isinstance(callback, StopOnMeanTrainingReward)
+            assert (callback.threshold, callback.window, callback.episode_key) == (490, 100, "l")
+        elif env_id == "MountainCarGoalBonus-v0":
+            (callback,) = manager.callbacks
+            assert isinstance(callback, GoalCountCallback)
+            assert manager.monitor_kwargs == {"info_keywords": ("goal_reached",)}
+        else:
+            assert manager.callbacks == []
+    finally:
+        model.env.close()
+
+
+@pytest.mark.parametrize("algo", sorted(SAMPLERS))
+def test_sampler(algo: str) -> None:
+    assert HYPERPARAMS_SAMPLER[algo] is SAMPLERS[algo]
+    study = optuna.create_study(sampler=optuna.samplers.RandomSampler(seed=0))
+    for _ in range(3):
+        trial = study.ask()
+        sampled = HYPERPARAMS_SAMPLER[algo](trial, 0, 1, {"using_her_replay_buffer": False, "her_kwargs": {}})
+        # What `--trial-id` reloads from a study is what the trial ran with
+        assert HYPERPARAMS_CONVERTER[algo](trial.params) == sampled
+        assert {"gamma", "learning_rate", "batch_size", "target_update_interval", "loss"} <= set(sampled)
+        has_mc = {"mc_initial_prob", "mc_final_prob", "mc_fraction", "mc_mixing", "mc_truncation"} <= set(sampled)
+        has_sarsa = {"qlearning_initial_prob", "qlearning_final_prob", "qlearning_fraction", "sarsa_target"} <= set(sampled)
+        # A variant's fixed probability is not sampled
+        assert (has_mc, has_sarsa) == {"offon_dqn": (True, True), "dqn_mc": (True, False), "dqn_sarsa": (False, True)}[algo]
+        model = ALGOS[algo]("MlpPolicy", "CartPole-v1", device="cpu", **sampled)
+        for key in TARGET_KEYS & set(sampled):
+            assert getattr(model, key) == sampled[key]
+        study.tell(trial, 0.0)
