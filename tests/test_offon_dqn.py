@@ -394,7 +394,7 @@ class RecordingWriter(KVWriter):
 
 
 def test_training_statistics_are_logged(tmp_path):
-    model = OffOnDQN("MlpPolicy", "CartPole-v1", tensorboard_log=str(tmp_path), **constant_probs(0.5, 0.5), **SMALL)
+    model = OffOnDQN("MlpPolicy", "CartPole-v1", seed=0, tensorboard_log=str(tmp_path), **constant_probs(0.5, 0.5), **SMALL)
     writer = RecordingWriter()
     model.learn(1, tb_log_name="probe")  # sets up a logger; replaced below to capture what is written
     model.set_logger(Logger(folder=None, output_formats=[writer]))
@@ -403,9 +403,12 @@ def test_training_statistics_are_logged(tmp_path):
     assert train_records
     record = train_records[-1]
     assert record["train/mc_prob"] == 0.5 and record["train/qlearning_prob"] == 0.5
-    # MC: delta1 times the share of sampled transitions whose return is known; Sarsa: of the rest, half
-    assert 0.2 < record["train/mc_target_fraction"] <= 0.55
-    assert 0.1 < record["train/sarsa_target_fraction"] < 0.4
+    # Each record covers one training call (32 samples here): average over the calls. MC: delta1 times the share of
+    # sampled transitions whose return is known; Sarsa: half of the rest, where the next action is known
+    mc_share = np.mean([record["train/mc_target_fraction"] for record in train_records])
+    sarsa_share = np.mean([record["train/sarsa_target_fraction"] for record in train_records])
+    assert 0.2 < mc_share <= 0.5
+    assert 0.1 < sarsa_share < 0.4
     assert np.isfinite(record["train/q_mc_gap"])
     assert (tmp_path / "probe_1").is_dir(), "tensorboard logs are written"
 
