@@ -15,6 +15,7 @@ from stable_baselines3 import DQN
 
 from sb3_offon import OffOnDQN
 from sb3_offon.callbacks import GoalCountCallback, StopOnMeanTrainingReward
+from sb3_offon.offon_dqn.offon_dqn import OFFON_PARAMETERS
 from sb3_offon.variants import DQNMC, DQNSarsa
 from sb3_offon.zoo import ALGOS, HYPERPARAMS_DIR, SAMPLERS, register, resolve_config
 
@@ -38,18 +39,7 @@ PAPER_ENVS = {
     "CartPoleFallPenalty-v1",
     "MountainCarGoalBonus-v0",
 }
-TARGET_KEYS = {
-    "mc_initial_prob",
-    "mc_final_prob",
-    "mc_fraction",
-    "qlearning_initial_prob",
-    "qlearning_final_prob",
-    "qlearning_fraction",
-    "mc_mixing",
-    "sarsa_target",
-    "mc_truncation",
-    "loss",
-}
+TARGET_KEYS = set(OFFON_PARAMETERS)
 # Environments no entry names, to build the ``default`` entries with
 UNLISTED_ENV = "CartPole-v0"
 HAS_ALE = importlib.util.find_spec("ale_py") is not None

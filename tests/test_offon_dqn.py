@@ -204,14 +204,16 @@ def test_schedules_decay_linearly_then_stay():
     [
         {},
         {"n_steps": 3},
+        {"n_envs": 1},
         {"optimize_memory_usage": True, "replay_buffer_kwargs": {"handle_timeout_termination": False}},
     ],
-    ids=["1-step", "3-step", "optimize-memory"],
+    ids=["1-step", "3-step", "one-env", "optimize-memory"],
 )
 def test_bit_identical_to_dqn_with_qlearning_only(extra):
     def train(algo, **kwargs):
-        env = make_vec_env("CartPole-v1", n_envs=2, seed=5)
-        return algo("MlpPolicy", env, seed=5, gradient_steps=2, **SMALL, **extra, **kwargs).learn(800)
+        settings = dict(extra)
+        env = make_vec_env("CartPole-v1", n_envs=settings.pop("n_envs", 2), seed=5)
+        return algo("MlpPolicy", env, seed=5, gradient_steps=2, **SMALL, **settings, **kwargs).learn(800)
 
     ours, theirs = train(OffOnDQN, **Q_ONLY), train(DQN)
     assert ours.num_timesteps == theirs.num_timesteps

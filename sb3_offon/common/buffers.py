@@ -192,15 +192,20 @@ class OffOnBufferMixin:
         return self.next_observations[slot]
 
     def _get_samples(self, batch_inds: np.ndarray, env: VecNormalize | None = None) -> Any:
-        # SB3 draws each sample's env index inside _get_samples and does not return it. Replaying that one draw from
-        # the same global RNG state recovers the indices, so SB3's sampling code is reused as it is and the global RNG
-        # ends where plain SB3 would leave it (which the bit-identity with DQN relies on).
-        rng_state = np.random.get_state()
-        samples = super()._get_samples(batch_inds, env)  # type: ignore[misc]
-        state_after = np.random.get_state()
-        np.random.set_state(rng_state)
-        env_indices = np.random.randint(0, high=self.n_envs, size=(len(batch_inds),))
-        np.random.set_state(state_after)
+        # SB3 draws each sample's env index inside _get_samples and does not return it. With one env it is 0. With
+        # several, replaying that one draw from the same global RNG state recovers the indices, so SB3's sampling code
+        # is reused as it is and the global RNG ends where plain SB3 would leave it (which the bit-identity with DQN
+        # relies on). The replay costs a save and two restores of the RNG state, about 0.5 ms, hence the shortcut.
+        if self.n_envs == 1:
+            samples = super()._get_samples(batch_inds, env)  # type: ignore[misc]
+            env_indices = np.zeros(len(batch_inds), dtype=np.int64)
+        else:
+            rng_state = np.random.get_state()
+            samples = super()._get_samples(batch_inds, env)  # type: ignore[misc]
+            state_after = np.random.get_state()
+            np.random.set_state(rng_state)
+            env_indices = np.random.randint(0, high=self.n_envs, size=(len(batch_inds),))
+            np.random.set_state(state_after)
 
         sample_class = OffOnDictReplayBufferSamples if isinstance(samples.observations, dict) else OffOnReplayBufferSamples
         return sample_class(

@@ -27,6 +27,19 @@ MC_MIXING_OPTIONS = ("sample", "convex")
 SARSA_TARGET_OPTIONS = ("sampled", "expected")
 MC_TRUNCATION_OPTIONS = ("bootstrap", "terminal")
 LOSS_FUNCTIONS = {"huber": F.smooth_l1_loss, "mse": F.mse_loss}
+# The constructor arguments OffOnDQN adds to DQN's
+OFFON_PARAMETERS = (
+    "mc_initial_prob",
+    "mc_final_prob",
+    "mc_fraction",
+    "qlearning_initial_prob",
+    "qlearning_final_prob",
+    "qlearning_fraction",
+    "mc_mixing",
+    "sarsa_target",
+    "mc_truncation",
+    "loss",
+)
 
 
 class OffOnDQN(DQN):
