@@ -21,6 +21,7 @@ import json
 import os
 import platform
 import statistics
+import subprocess
 import time
 from pathlib import Path
 
@@ -32,6 +33,7 @@ from stable_baselines3 import DQN
 
 import sb3_offon
 from sb3_offon import OffOnDQN
+from sb3_offon.offon_dqn.offon_dqn import OFFON_PARAMETERS
 
 # rl-baselines3-zoo's tuned DQN hyperparameters (hyperparams/dqn.yml), minus n_timesteps and the policy name
 ZOO_HYPERPARAMS = {
@@ -63,18 +65,6 @@ ZOO_HYPERPARAMS = {
     ),
 }
 ZOO_TIMESTEPS = {"CartPole-v1": 50_000, "LunarLander-v3": 100_000}
-OFFON_PARAMETERS = (
-    "mc_initial_prob",
-    "mc_final_prob",
-    "mc_fraction",
-    "qlearning_initial_prob",
-    "qlearning_final_prob",
-    "qlearning_fraction",
-    "mc_mixing",
-    "sarsa_target",
-    "mc_truncation",
-    "loss",
-)
 
 
 def parse_args() -> argparse.Namespace:
@@ -102,6 +92,16 @@ def parse_args() -> argparse.Namespace:
 def run_once(algo_class: type[DQN], env_id: str, hyperparams: dict, timesteps: int, seed: int) -> dict:
     """Build a model (untimed), then time its learn() call."""
     model = algo_class("MlpPolicy", env_id, seed=seed, verbose=0, device="cpu", **hyperparams)
+    # Time train() apart from the rest of learn() (collecting and storing transitions): wrap the bound method
+    train_seconds = [0.0]
+    untimed_train = model.train
+
+    def timed_train(*args, **kwargs) -> None:
+        start = time.perf_counter()
+        untimed_train(*args, **kwargs)
+        train_seconds[0] += time.perf_counter() - start
+
+    model.train = timed_train  # type: ignore[method-assign]
     gc.collect()
     load_before = os.getloadavg()
     cpu_start, wall_start = time.process_time(), time.perf_counter()
@@ -110,12 +110,17 @@ def run_once(algo_class: type[DQN], env_id: str, hyperparams: dict, timesteps: i
     cpu = time.process_time() - cpu_start
     load_after = os.getloadavg()
     steps = model.num_timesteps
+    episode_lengths = model.env.env_method("get_episode_lengths")[0]  # from SB3's Monitor wrapper
     run = {
         "algo": algo_class.__name__,
         "env_steps": steps,
         "gradient_steps": model._n_updates,
         "learn_seconds": wall,
         "cpu_seconds": cpu,
+        "train_seconds": train_seconds[0],
+        "collect_seconds": wall - train_seconds[0],
+        "episodes": len(episode_lengths),
+        "mean_episode_length": float(np.mean(episode_lengths)) if episode_lengths else None,
         "steps_per_second": steps / wall,
         "cpu_steps_per_second": steps / cpu,
         "loadavg_before": load_before,
@@ -145,7 +150,8 @@ def markdown_table(result: dict) -> str:
     lines = [
         f"{result['env']}, {result['timesteps']} env steps per run, {result['repeats']} alternating pairs, "
         f"seed {result['seed']}, {result['threads']} torch thread(s), load average "
-        f"{result['loadavg_start'][0]:.2f} at start / {result['loadavg_end'][0]:.2f} at end ({result['cpu_count']} CPUs)",
+        f"{result['loadavg_start'][0]:.2f} at start / {result['loadavg_end'][0]:.2f} at end ({result['cpu_count']} CPUs), "
+        f"sb3_offon {result['git']}, SB3 {result['versions']['stable_baselines3']}, torch {result['versions']['torch']}",
         "",
         "| pair | order | DQN steps/s | OffOnDQN steps/s | ratio | DQN CPU steps/s | OffOnDQN CPU steps/s | CPU ratio |",
         "|---:|---|---:|---:|---:|---:|---:|---:|",
@@ -165,7 +171,21 @@ def markdown_table(result: dict) -> str:
         "",
         f"Pair ratios (wall): min {wall['pair_ratio_min']:.3f}, max {wall['pair_ratio_max']:.3f}; "
         f"(CPU): min {cpu['pair_ratio_min']:.3f}, max {cpu['pair_ratio_max']:.3f}.",
+        "",
+        "Where the time of learn() went: train() (sampling, targets, gradient steps) and the rest (acting, env steps, "
+        "storing transitions), in microseconds per env step:",
+        "",
+        "| pair | algorithm | learn | train | rest | episodes | mean episode length |",
+        "|---:|---|---:|---:|---:|---:|---:|",
     ]
+    for pair in result["pairs"]:
+        for algo in ("DQN", "OffOnDQN"):
+            run = pair[algo]
+            per_step = 1e6 / run["env_steps"]
+            lines.append(
+                f"| {pair['repeat']} | {algo} | {run['learn_seconds'] * per_step:.0f} | {run['train_seconds'] * per_step:.0f} "
+                f"| {run['collect_seconds'] * per_step:.0f} | {run['episodes']} | {run['mean_episode_length']:.1f} |"
+            )
     return "\n".join(lines)
 
 
@@ -194,6 +214,9 @@ if __name__ == "__main__":
             "gymnasium": gym.__version__,
             "numpy": np.__version__,
         },
+        "git": subprocess.run(  # the commit measured, "+dirty" when the working tree has changes
+            ["git", "describe", "--always", "--dirty=+dirty"], capture_output=True, text=True, cwd=Path(__file__).parent
+        ).stdout.strip(),
         "loadavg_start": os.getloadavg(),
         "pairs": [],
     }
@@ -227,6 +250,14 @@ if __name__ == "__main__":
             [pair["OffOnDQN"][metric] for pair in result["pairs"]],
         )
         for key, metric in (("wall", "steps_per_second"), ("cpu", "cpu_steps_per_second"))
+    }
+    # Median microseconds per env step spent in train() and in the rest of learn()
+    result["summary"]["us_per_env_step"] = {
+        algo: {
+            part: statistics.median(1e6 * pair[algo][f"{part}_seconds"] / pair[algo]["env_steps"] for pair in result["pairs"])
+            for part in ("learn", "train", "collect")
+        }
+        for algo in ("DQN", "OffOnDQN")
     }
     wall = result["summary"]["wall"]
     print(
