@@ -75,11 +75,16 @@ def reference_targets(model: OffOnDQN, data: OffOnReplayBufferSamples):
 
 
 def targets_at(model: OffOnDQN, data, mc: float, qlearning: float, seed: int = 0):
+    """The targets and their masks (NumPy) at these probabilities, drawn as train() draws them."""
     model.mc_prob, model.qlearning_prob = mc, qlearning
-    gen = th.Generator().manual_seed(seed)
-    uniforms = th.rand(2, len(data.rewards), 1, generator=gen)
+    uniforms = np.random.default_rng(seed).random((2, len(data.rewards), 1), dtype=np.float32)
     with th.no_grad():
-        return model._targets(data, uniforms[0], uniforms[1])
+        targets, use_mc, use_sarsa = model._targets(data, uniforms[0] < mc, uniforms[1] >= qlearning)
+    return targets, mask_tensor(use_mc), mask_tensor(use_sarsa)
+
+
+def mask_tensor(mask: np.ndarray | None) -> th.Tensor | None:
+    return None if mask is None else th.as_tensor(mask)
 
 
 @pytest.fixture(scope="module")
@@ -413,6 +418,26 @@ def test_training_statistics_are_logged(tmp_path):
     assert 0.1 < sarsa_share < 0.4
     assert np.isfinite(record["train/q_mc_gap"])
     assert (tmp_path / "probe_1").is_dir(), "tensorboard logs are written"
+
+
+def test_target_statistics_by_hand():
+    model = OffOnDQN("MlpPolicy", "CartPole-v1", **SMALL)
+    writer = RecordingWriter()
+    model.set_logger(Logger(folder=None, output_formats=[writer]))
+    # Two gradient steps of two samples; G is known for one sample of each
+    q_taken = [th.tensor([[1.0], [2.0]]), th.tensor([[4.0], [0.5]])]
+    returns = [np.array([[0.0], [np.nan]], dtype=np.float32), np.array([[np.nan], [1.0]], dtype=np.float32)]
+    model._record_target_statistics([1.0, 3.0], q_taken, returns, n_mc_targets=1, n_sarsa_targets=2)
+    model.logger.dump()
+    record = writer.records[-1]
+    assert record["train/loss"] == pytest.approx(2.0)
+    assert record["train/mc_target_fraction"] == pytest.approx(0.25)
+    assert record["train/sarsa_target_fraction"] == pytest.approx(0.5)
+    assert record["train/q_mc_gap"] == pytest.approx(((1.0 - 0.0) + (0.5 - 1.0)) / 2)
+    # No known return: no gap to report
+    model._record_target_statistics([1.0], q_taken[:1], [np.full((2, 1), np.nan, dtype=np.float32)], 0, 0)
+    model.logger.dump()
+    assert "train/q_mc_gap" not in writer.records[-1]
 
 
 def test_tensorboard_default_run_name(tmp_path):

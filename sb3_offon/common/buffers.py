@@ -121,10 +121,9 @@ class OffOnBufferMixin:
         done: np.ndarray,
         infos: list[dict[str, Any]],
     ) -> None:
-        action_ids = np.asarray(action).reshape(self.n_envs)
-        running = self.episode_lengths > 0
         # This action was taken at the next state of each running episode's previous transition
-        self.next_actions[(self.pos - 1) % self.buffer_size, running] = action_ids[running]
+        action_ids = np.asarray(action).reshape(self.n_envs)
+        np.copyto(self.next_actions[(self.pos - 1) % self.buffer_size], action_ids, where=self.episode_lengths > 0)
         # The slot about to be overwritten forgets what it knew about its old transition
         self.mc_returns[self.pos] = np.nan
         self.next_actions[self.pos] = UNKNOWN_ACTION
@@ -133,7 +132,7 @@ class OffOnBufferMixin:
 
         self._log_rewards(np.asarray(reward, dtype=np.float32).reshape(self.n_envs))
         self._n_adds += 1
-        done_envs = np.flatnonzero(np.asarray(done).reshape(self.n_envs))
+        done_envs = np.flatnonzero(done)
         if len(done_envs) > 0:
             truncated = np.array([bool(infos[env].get("TimeLimit.truncated", False)) for env in done_envs], dtype=bool)
             tails = np.zeros(len(done_envs))
@@ -143,11 +142,14 @@ class OffOnBufferMixin:
                 self._finish_episode(env, tail)
 
     def _log_rewards(self, reward: np.ndarray) -> None:
-        if self.episode_lengths.max() >= len(self._episode_rewards):
+        env_ids = np.arange(self.n_envs)
+        try:
+            self._episode_rewards[self.episode_lengths, env_ids] = reward
+        except IndexError:  # an episode longer than the log: double it (rarely, so no size check at every step)
             grown = np.zeros((2 * len(self._episode_rewards), self.n_envs), dtype=np.float32)
             grown[: len(self._episode_rewards)] = self._episode_rewards
             self._episode_rewards = grown
-        self._episode_rewards[self.episode_lengths, np.arange(self.n_envs)] = reward
+            self._episode_rewards[self.episode_lengths, env_ids] = reward
         self.episode_lengths += 1
 
     def _state_values(self, observations: Any, env_indices: np.ndarray) -> np.ndarray:
@@ -208,10 +210,13 @@ class OffOnBufferMixin:
             np.random.set_state(state_after)
 
         sample_class = OffOnDictReplayBufferSamples if isinstance(samples.observations, dict) else OffOnReplayBufferSamples
+        # Fancy indexing made fresh arrays: the tensors may share their memory instead of copying them like to_torch
+        next_actions = self._sarsa_next_actions(batch_inds, env_indices).reshape(-1, 1)
+        mc_returns = self.mc_returns[batch_inds, env_indices].reshape(-1, 1)
         return sample_class(
             *samples,
-            next_actions=self.to_torch(self._sarsa_next_actions(batch_inds, env_indices).reshape(-1, 1)),  # type: ignore[attr-defined]
-            mc_returns=self.to_torch(self.mc_returns[batch_inds, env_indices].reshape(-1, 1)),  # type: ignore[attr-defined]
+            next_actions=th.from_numpy(next_actions).to(self.device),  # type: ignore[attr-defined]
+            mc_returns=th.from_numpy(mc_returns).to(self.device),  # type: ignore[attr-defined]
         )
 
     def _sarsa_next_actions(self, batch_inds: np.ndarray, env_indices: np.ndarray) -> np.ndarray:
