@@ -336,6 +336,16 @@ def code_version() -> dict[str, str]:
     return _CODE_VERSION
 
 
+def run_order(specs: list[dict]) -> list[dict]:
+    """
+    Seed by seed, and within a seed the longest runs first.
+
+    An interrupted grid then holds whole seeds (every algorithm and env of seeds 0..k), which compare fairly, rather
+    than every seed of the first algorithms; and within a seed, long runs first make the grid end sooner.
+    """
+    return sorted(specs, key=lambda spec: (spec["seed"], -spec["n_timesteps"]))
+
+
 # ----------------------------------------------------------------------------------------------------------------------
 # Executors: both yield the results of run_one as the runs finish
 # ----------------------------------------------------------------------------------------------------------------------
@@ -397,8 +407,7 @@ def main(argv: list[str] | None = None) -> int:
         )
         return 2
     todo = [spec for spec in specs if statuses[id(spec)] != "finished"]
-    # Longest runs first: the grid ends sooner
-    todo.sort(key=lambda spec: -spec["n_timesteps"])
+    todo = run_order(todo)
     print(
         f"{len(specs)} runs ({len(args.algos)} algos x {len(args.envs)} envs x {len(args.seeds)} seeds, '{args.set}' set) "
         f"in {args.root / args.set}: {len(specs) - len(todo)} finished, {len(todo)} to run"

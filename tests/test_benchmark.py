@@ -6,6 +6,7 @@ output is deleted, and ``plot.py`` draws every figure and table from the result 
 Section 4.4 tasks added, for their figures). Each training run costs ~12 s of CPU, mostly the interpreter's imports.
 """
 
+import importlib.util
 import json
 import subprocess
 import sys
@@ -57,6 +58,32 @@ def test_dry_run_of_the_tuned_set(tmp_path: Path):
     assert len(commands) == 24
     assert all("-conf" not in line and "--num-threads 1" in line for line in commands)
     assert not (tmp_path / "tuned").exists()
+    # Seed by seed: an interrupted grid holds whole seeds
+    seeds = [int(line.split("--seed ")[1].split()[0]) for line in commands]
+    assert seeds == sorted(seeds)
+
+
+def test_run_order_is_seed_by_seed_longest_first():
+    spec = importlib.util.spec_from_file_location("benchmark_script", SCRIPTS / "benchmark.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    grid = [
+        {"algo": algo, "env": env, "seed": seed, "n_timesteps": budget}
+        for algo in ("a", "b")
+        for env, budget in (("short", 100), ("long", 300))
+        for seed in (1, 0)
+    ]
+    order = [(spec["seed"], spec["env"], spec["algo"]) for spec in module.run_order(grid)]
+    assert order == [
+        (0, "long", "a"),
+        (0, "long", "b"),
+        (0, "short", "a"),
+        (0, "short", "b"),
+        (1, "long", "a"),
+        (1, "long", "b"),
+        (1, "short", "a"),
+        (1, "short", "b"),
+    ]
 
 
 def test_local_pool_writes_the_zoo_layout(local_root: Path):
