@@ -13,7 +13,7 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.envs import FakeImageEnv, IdentityEnv, SimpleMultiObsEnv
 from stable_baselines3.common.logger import KVWriter, Logger
 from stable_baselines3.common.monitor import Monitor
-from stable_baselines3.common.vec_env import DummyVecEnv
+from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
 from sb3_offon import OffOnDictReplayBuffer, OffOnDQN, OffOnNStepReplayBuffer, OffOnReplayBuffer
 from sb3_offon.common.buffers import OffOnReplayBufferSamples, discounted_returns
@@ -263,6 +263,40 @@ def test_returns_in_training_match_rewards_and_truncation_bootstrap():
     assert buffer.timeouts[:n, 0].any() and (buffer.dones[:n, 1] * (1 - buffer.timeouts[:n, 1])).any(), (
         "both truncations and terminations occurred"
     )
+
+
+def test_reward_normalisation_scales_returns_like_rewards():
+    """The buffer keeps raw rewards and raw returns; VecNormalize's reward scale is applied to both at sampling."""
+    venv = VecNormalize(DummyVecEnv([lambda: gym.make("CartPole-v1", max_episode_steps=15)]), norm_obs=False, gamma=0.9)
+    model = OffOnDQN("MlpPolicy", venv, gamma=0.9, seed=0, exploration_final_eps=1.0, **{**SMALL, "learning_starts": 10_000})
+    model.learn(300)
+    buffer = model.replay_buffer
+    scale = np.sqrt(venv.ret_rms.var + venv.epsilon)
+    assert abs(scale - 1.0) > 0.1, "a scale of 1 would not test anything"
+    # Raw units in the buffer: a terminated episode's returns are those of its raw rewards (CartPole: 1 per step)
+    ends = np.flatnonzero(buffer.dones[: buffer.pos, 0])
+    terminated = [i for i in range(1, len(ends)) if not buffer.timeouts[ends[i], 0]]
+    assert terminated
+    start, end = ends[terminated[0] - 1] + 1, ends[terminated[0]]
+    expected = discounted_returns(buffer.rewards[start : end + 1, 0], 0.9)
+    np.testing.assert_allclose(buffer.mc_returns[start : end + 1, 0], expected, rtol=1e-5)
+    # Samples: rewards and returns divided by the same scale
+    slots = np.arange(start, end + 1)
+    samples = buffer._get_samples(slots, env=venv)
+    np.testing.assert_allclose(samples.rewards.numpy()[:, 0], buffer.rewards[slots, 0] / scale, rtol=1e-5)
+    np.testing.assert_allclose(samples.mc_returns.numpy()[:, 0], buffer.mc_returns[slots, 0] / scale, rtol=1e-5)
+    # A truncation's bootstrap, max_a Q_target (learnt from normalised rewards), enters the raw return times the scale
+    final_obs = buffer.next_observations[:3, 0]
+    with th.no_grad():
+        q_values = model.q_net_target(th.as_tensor(final_obs)).max(dim=1).values.numpy()
+    np.testing.assert_allclose(model._target_state_values(final_obs), q_values * scale, rtol=1e-5)
+
+
+def test_set_random_seed_reseeds_the_target_draws():
+    model = OffOnDQN("MlpPolicy", "CartPole-v1", seed=0, **SMALL)
+    model.learn(300)
+    model.set_random_seed(5)
+    assert model.target_rng.bit_generator.state == np.random.default_rng(5).bit_generator.state
 
 
 def test_terminal_truncation_mode_sets_no_value_function():

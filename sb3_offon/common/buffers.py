@@ -43,6 +43,13 @@ class OffOnDictReplayBufferSamples(NamedTuple):
     mc_returns: th.Tensor
 
 
+def reward_scale(env: VecNormalize | None) -> float:
+    """The factor VecNormalize divides rewards by (1 without reward normalisation), before its clip."""
+    if env is None or not env.norm_reward:
+        return 1.0
+    return float(np.sqrt(env.ret_rms.var + env.epsilon))
+
+
 def discounted_returns(rewards: np.ndarray, gamma: float, tail_value: float = 0.0) -> np.ndarray:
     """
     G_t = r_t + gamma * G_{t+1} for every step of one episode, computed backwards in one vectorised pass.
@@ -212,7 +219,8 @@ class OffOnBufferMixin:
         sample_class = OffOnDictReplayBufferSamples if isinstance(samples.observations, dict) else OffOnReplayBufferSamples
         # Fancy indexing made fresh arrays: the tensors may share their memory instead of copying them like to_torch
         next_actions = self._sarsa_next_actions(batch_inds, env_indices).reshape(-1, 1)
-        mc_returns = self.mc_returns[batch_inds, env_indices].reshape(-1, 1)
+        # Stored in raw reward units, like the rewards, and scaled like them (the per-reward clip aside) under VecNormalize
+        mc_returns = self.mc_returns[batch_inds, env_indices].reshape(-1, 1) / reward_scale(env)
         return sample_class(
             *samples,
             next_actions=th.from_numpy(next_actions).to(self.device),  # type: ignore[attr-defined]

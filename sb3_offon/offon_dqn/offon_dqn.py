@@ -18,6 +18,7 @@ from sb3_offon.common.buffers import (
     OffOnNStepReplayBuffer,
     OffOnReplayBuffer,
     OffOnReplayBufferSamples,
+    reward_scale,
 )
 from sb3_offon.offon_dqn.policies import CnnPolicy, MlpPolicy, MultiInputPolicy
 
@@ -249,12 +250,15 @@ class OffOnDQN(DQN):
         if issubclass(self.replay_buffer_class, OffOnBufferMixin):  # type: ignore[arg-type]
             self.replay_buffer_kwargs.setdefault("gamma", self.gamma)
 
+        # SB3's setup calls set_random_seed(self.seed): keep the draws' generator as it is (a loaded model draws on)
+        target_rng = self.target_rng
         with warnings.catch_warnings():
             if picks_buffer or issubclass(self.replay_buffer_class, OffOnNStepReplayBuffer):  # type: ignore[arg-type]
                 # We picked the buffer (or built it at the first setup), with n_steps passed on: SB3's warning that
                 # n_steps is ignored for a custom replay_buffer_class does not apply.
                 warnings.filterwarnings("ignore", message="`n_steps=.*is ignored")
             super()._setup_model()
+        self.target_rng = target_rng
 
         self.mc_schedule = LinearSchedule(self.mc_initial_prob, self.mc_final_prob, self.mc_fraction)
         self.qlearning_schedule = LinearSchedule(
@@ -285,7 +289,19 @@ class OffOnDQN(DQN):
         # them as the buffer converts its samples, onto the networks' device
         obs_tensor = obs_as_tensor(observations, self.policy.device)
         with th.no_grad():
-            return self.q_net_target(obs_tensor).max(dim=1).values.cpu().numpy()
+            values = self.q_net_target(obs_tensor).max(dim=1).values.cpu().numpy()
+        # Q is in the units of the (maybe normalised) rewards it learnt from, the buffer's returns in raw units
+        return values * reward_scale(self._vec_normalize_env)
+
+    def set_random_seed(self, seed: int | None = None) -> None:
+        """
+        Seed the global RNGs, the action space and the env as SB3 does, and the target draws' own generator.
+
+        :param seed: the seed (None: leave everything as it is, as SB3 does)
+        """
+        super().set_random_seed(seed)
+        if seed is not None:
+            self.target_rng = np.random.default_rng(seed)
 
     def _setup_learn(
         self,
