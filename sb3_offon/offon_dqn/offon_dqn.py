@@ -67,6 +67,9 @@ class OffOnDQN(DQN):
       from the expectation under the current epsilon-greedy policy (``"expected"``).
     - The paper uses a squared error; SB3's DQN uses the Huber loss, which is the default here (``loss="mse"`` for
       the paper's).
+    - With VecNormalize's reward normalisation, the buffer keeps raw rewards (as SB3 does) and raw returns; sampled
+      returns are divided by the same factor as the rewards (without the per-reward clip), and a truncation's
+      bootstrap, in the normalised units the network learnt, is converted to raw units when the episode ends.
 
     :param policy: The policy model to use (MlpPolicy, CnnPolicy, ...)
     :param env: The environment to learn from (if registered in Gym, can be str)
