@@ -139,8 +139,9 @@ class OffOnBufferMixin:
 
         self._log_rewards(np.asarray(reward, dtype=np.float32).reshape(self.n_envs))
         self._n_adds += 1
-        done_envs = np.flatnonzero(done)
-        if len(done_envs) > 0:
+        done = np.asarray(done)
+        if done.any():
+            done_envs = np.flatnonzero(done)
             truncated = np.array([bool(infos[env].get("TimeLimit.truncated", False)) for env in done_envs], dtype=bool)
             tails = np.zeros(len(done_envs))
             if truncated.any():
