@@ -153,12 +153,21 @@ def threshold(env: str) -> float | None:
 # ----------------------------------------------------------------------------------------------------------------------
 # Statistics: means over seeds with rliable's stratified bootstrap
 # ----------------------------------------------------------------------------------------------------------------------
+def interval_estimates(scores: dict, aggregate, reps: int) -> tuple[dict, dict]:
+    """
+    ``rly.get_interval_estimates``, reproducible: the same data give the same intervals at every redraw.
+
+    rliable's ``StratifiedBootstrap`` draws its resamples from NumPy's global RNG (``update_indices`` calls
+    ``np.random.choice``) and ignores ``random_state``, so the global RNG is seeded before each call.
+    """
+    np.random.seed(0)
+    return rly.get_interval_estimates(scores, aggregate, reps=reps, random_state=np.random.RandomState(0))
+
+
 def mean_ci(values: np.ndarray, reps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Mean over runs (axis 0) of ``values`` shaped (runs,) or (runs, T), with its 95% bootstrap CI (low, high)."""
     scores = np.asarray(values, dtype=float).reshape(len(values), 1, -1)  # rliable's (runs, tasks, T)
-    point, interval = rly.get_interval_estimates(
-        {"x": scores}, lambda s: s.mean(axis=0)[0], reps=reps, random_state=np.random.RandomState(0)
-    )
+    point, interval = interval_estimates({"x": scores}, lambda s: s.mean(axis=0)[0], reps)
     return point["x"], interval["x"][0], interval["x"][1]
 
 
@@ -373,24 +382,14 @@ def aggregates(runs: dict[str, dict[str, list[Run]]], scores: dict, reps: int) -
             matrices[measure][algo] = np.array(columns).T
     result: dict = {"envs": envs, "algos": algos, "runs": {algo: len(matrices["final"][algo]) for algo in algos}}
     for measure, matrix in matrices.items():
-        point, interval = rly.get_interval_estimates(
-            matrix,
-            lambda s: np.array([metrics.aggregate_iqm(s)]),
-            reps=reps,
-            random_state=np.random.RandomState(0),
-        )
+        point, interval = interval_estimates(matrix, lambda s: np.array([metrics.aggregate_iqm(s)]), reps)
         result[f"iqm_{measure}"] = {algo: (point[algo][0], *interval[algo][:, 0]) for algo in algos}
     if BASELINE in algos:
         pairs = {algo: (matrices["final"][algo], matrices["final"][BASELINE]) for algo in algos if algo != BASELINE}
         if pairs:
             # rliable's metric is Mann-Whitney U per task (one SciPy test per resample and task): the same figure is
             # computed vectorised inside rliable's bootstrap, and checked against rliable's own point estimate
-            point, interval = rly.get_interval_estimates(
-                pairs,
-                lambda x, y: np.array([fast_probability_of_improvement(x, y)]),
-                reps=reps,
-                random_state=np.random.RandomState(0),
-            )
+            point, interval = interval_estimates(pairs, lambda x, y: np.array([fast_probability_of_improvement(x, y)]), reps)
             for algo, (x, y) in pairs.items():
                 assert np.isclose(point[algo][0], metrics.probability_of_improvement(x, y))
             result["poi"] = {algo: (point[algo][0], *interval[algo][:, 0]) for algo in pairs}

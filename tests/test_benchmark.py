@@ -153,3 +153,16 @@ def test_plot_writes_every_figure_and_table(local_root: Path, tmp_path: Path):
             assert sum(f"| {env} (≥" in row and f"| {label} |" in row for row in rows) == 1, (env, label)
     assert "## Across environments (rliable)" in table and "P(improvement over DQN)" in table
     assert "## Section 4.4: CartPoleFallPenalty-v1" in table and "## Section 4.4: MountainCarGoalBonus-v0" in table
+
+
+def test_bootstrap_intervals_are_the_same_at_every_redraw():
+    spec = importlib.util.spec_from_file_location("plot_script", SCRIPTS / "plot.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    values = np.random.default_rng(0).normal(size=(10, 5))
+    first = module.mean_ci(values, reps=500)
+    np.random.seed(123)  # whatever ran before must not matter (rliable draws from NumPy's global RNG)
+    second = module.mean_ci(values, reps=500)
+    for a, b in zip(first, second, strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert np.all(first[1] < first[0]) and np.all(first[0] < first[2]), "a real interval around the mean"
