@@ -460,7 +460,7 @@ def test_target_statistics_by_hand():
     model.set_logger(Logger(folder=None, output_formats=[writer]))
     # Two gradient steps of two samples; G is known for one sample of each
     q_taken = [th.tensor([[1.0], [2.0]]), th.tensor([[4.0], [0.5]])]
-    returns = [np.array([[0.0], [np.nan]], dtype=np.float32), np.array([[np.nan], [1.0]], dtype=np.float32)]
+    returns = [th.tensor([[0.0], [float("nan")]]), th.tensor([[float("nan")], [1.0]])]
     model._record_target_statistics([1.0, 3.0], q_taken, returns, n_mc_targets=1, n_sarsa_targets=2)
     model.logger.dump()
     record = writer.records[-1]
@@ -469,7 +469,7 @@ def test_target_statistics_by_hand():
     assert record["train/sarsa_target_fraction"] == pytest.approx(0.5)
     assert record["train/q_mc_gap"] == pytest.approx(((1.0 - 0.0) + (0.5 - 1.0)) / 2)
     # No known return: no gap to report
-    model._record_target_statistics([1.0], q_taken[:1], [np.full((2, 1), np.nan, dtype=np.float32)], 0, 0)
+    model._record_target_statistics([1.0], q_taken[:1], [th.full((2, 1), float("nan"))], 0, 0)
     model.logger.dump()
     assert "train/q_mc_gap" not in writer.records[-1]
 

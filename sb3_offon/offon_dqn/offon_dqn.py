@@ -352,10 +352,10 @@ class OffOnDQN(DQN):
             th.nn.utils.clip_grad_norm_(self.policy.parameters(), self.max_grad_norm)
             self.policy.optimizer.step()
 
-            # Statistics: the loss is read at each step as SB3's DQN does; Q(s, a) once per call
+            # Statistics: the loss is read at each step as SB3's DQN does; Q(s, a) and G once per call, in one copy each
             losses.append(loss.item())
             q_taken.append(current_q_values.detach())
-            mc_returns.append(replay_data.mc_returns.numpy(force=True))
+            mc_returns.append(replay_data.mc_returns)
             n_mc_targets += 0 if use_mc is None else int(np.count_nonzero(use_mc))
             n_sarsa_targets += 0 if use_sarsa is None else int(np.count_nonzero(use_sarsa))
 
@@ -433,11 +433,11 @@ class OffOnDQN(DQN):
         self,
         losses: list[float],
         q_taken: list[th.Tensor],
-        mc_returns: list[np.ndarray],
+        mc_returns: list[th.Tensor],
         n_mc_targets: int,
         n_sarsa_targets: int,
     ) -> None:
-        returns = np.concatenate(mc_returns)
+        returns = th.cat(mc_returns).numpy(force=True)
         self.logger.record("train/loss", np.mean(losses))
         self.logger.record("train/mc_target_fraction", n_mc_targets / len(returns))
         self.logger.record("train/sarsa_target_fraction", n_sarsa_targets / len(returns))
