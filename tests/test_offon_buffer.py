@@ -4,6 +4,7 @@ import pickle
 
 import numpy as np
 import pytest
+import torch as th
 from gymnasium import spaces
 
 from sb3_offon import OffOnDictReplayBuffer, OffOnNStepReplayBuffer, OffOnReplayBuffer
@@ -122,7 +123,7 @@ def test_episode_longer_than_the_buffer_keeps_correct_returns_in_remaining_slots
     np.testing.assert_allclose(expected[3:], [8.875, 9.75, 9.5, 7.0])
 
 
-def test_episode_longer_than_reward_log_capacity():
+def test_episode_thousands_of_steps_longer_than_the_buffer():
     buffer = make_buffer(buffer_size=8)
     rewards = np.arange(3000, dtype=np.float32) % 7
     for index, reward in enumerate(rewards):
@@ -213,6 +214,30 @@ def test_sampling_moves_the_global_rng_as_sb3_does():
     our_samples = ours.sample(32)
     np.testing.assert_array_equal(np.random.get_state()[1], state_after_plain)
     np.testing.assert_array_equal(plain_samples.observations.numpy(), our_samples.observations.numpy())
+
+
+@pytest.mark.parametrize(
+    "buffer_class, kwargs",
+    [
+        (OffOnReplayBuffer, {}),
+        (OffOnReplayBuffer, {"optimize_memory_usage": True, "handle_timeout_termination": False}),
+        (OffOnNStepReplayBuffer, {"n_steps": 3}),
+    ],
+)
+def test_samples_do_not_change_when_the_buffer_does(buffer_class, kwargs):
+    # Sampled tensors share memory with the arrays that sampling made (to_torch): never with the buffer's storage
+    buffer = make_buffer(buffer_size=8, buffer_class=buffer_class, **kwargs)
+    for t in range(12):
+        step(buffer, [t], [t % 5], dones=[t % 4 == 3], obs_ids=[t], next_obs_ids=[t + 0.5])
+    samples = buffer.sample(16)
+    kept = [None if value is None else value.clone() for value in samples]
+    for name in ("observations", "next_observations", "actions", "rewards", "dones", "timeouts", "mc_returns", "next_actions"):
+        storage = getattr(buffer, name, None)
+        if storage is not None:
+            storage[...] = 3
+    for before, after in zip(kept, samples, strict=True):
+        if before is not None:
+            assert th.equal(before, after)
 
 
 def test_end_open_episodes_bootstraps_from_the_last_next_observation():

@@ -338,6 +338,8 @@ class OffOnDQN(DQN):
         mc_drawn, sarsa_drawn = uniforms[0] < self.mc_prob, uniforms[1] >= self.qlearning_prob
         losses, q_taken, mc_returns = [], [], []
         n_mc_targets = n_sarsa_targets = 0
+        # Listed once per call rather than walking the policy's modules at each step as SB3's DQN does (same clipping)
+        parameters = list(self.policy.parameters())
         for step in range(gradient_steps):
             replay_data: OffOnReplayBufferSamples = self.replay_buffer.sample(batch_size, env=self._vec_normalize_env)  # type: ignore[assignment]
             with th.no_grad():
@@ -349,7 +351,7 @@ class OffOnDQN(DQN):
 
             self.policy.optimizer.zero_grad()
             loss.backward()
-            th.nn.utils.clip_grad_norm_(self.policy.parameters(), self.max_grad_norm)
+            th.nn.utils.clip_grad_norm_(parameters, self.max_grad_norm)
             self.policy.optimizer.step()
 
             # Statistics: the loss is read at each step as SB3's DQN does; Q(s, a) and G once per call, in one copy each
@@ -369,49 +371,44 @@ class OffOnDQN(DQN):
         """
         The regression targets of one minibatch.
 
-        Which target each sample gets is decided in NumPy on the CPU copies of the sample's return and next action
-        (the same memory as the tensors on a CPU device): on a batch of 64, a NumPy operation costs a fraction of a
-        torch one, and a dozen small torch operations per gradient step were most of OffOnDQN's cost over DQN's.
+        Which target each sample gets is decided in NumPy, on CPU views of the sampled returns and next actions: on a
+        batch of 64, a NumPy operation costs a fraction of a torch one. The torch side then needs one gather (Sarsa)
+        and one ``where`` (Monte-Carlo) beyond SB3's own target computation.
 
         :param replay_data: the minibatch
         :param mc_drawn: per sample, whether the draw picked the Monte-Carlo target (used where G is known)
         :param sarsa_drawn: per sample, whether the draw picked Sarsa over Q-learning (used where a' is known)
         :return: the targets, and the masks of samples whose target is Monte-Carlo and Sarsa (None: not drawn at all)
         """
+        use_mc = use_sarsa = None
+        if self.mc_prob > 0.0:
+            known_return = ~np.isnan(replay_data.mc_returns.numpy(force=True))
+            use_mc = known_return if self.mc_mixing == "convex" else known_return & mc_drawn
+        if self.qlearning_prob < 1.0:
+            use_sarsa = self._sarsa_known(replay_data) & sarsa_drawn
+            if use_mc is not None and self.mc_mixing == "sample":
+                use_sarsa &= ~use_mc  # a Monte-Carlo target replaces the TD target altogether
+
         # For n-step replay, discount factor is gamma**n_steps (when no early termination)
         discounts = replay_data.discounts if replay_data.discounts is not None else self.gamma
         next_q_values_all = self.q_net_target(replay_data.next_observations)
-        next_q_values, _ = next_q_values_all.max(dim=1)
+        next_q_values, greedy_actions = next_q_values_all.max(dim=1)
         next_q_values = next_q_values.reshape(-1, 1)
-
-        use_sarsa = None
-        if self.qlearning_prob < 1.0:
-            use_sarsa = self._sarsa_known(replay_data) & sarsa_drawn
-            if use_sarsa.any():
-                sarsa_values = self._sarsa_next_values(replay_data, next_q_values_all)
-                next_q_values = th.where(self._mask(use_sarsa), sarsa_values, next_q_values)
+        if use_sarsa is not None and np.count_nonzero(use_sarsa):
+            next_q_values = self._sarsa_next_values(replay_data, next_q_values_all, next_q_values, greedy_actions, use_sarsa)
         # Written as in SB3's DQN: with Q-learning only, the targets are bit-identical
         target_q_values = replay_data.rewards + (1 - replay_data.dones) * discounts * next_q_values
 
-        use_mc = None
-        if self.mc_prob > 0.0:
-            known = ~np.isnan(replay_data.mc_returns.numpy(force=True))
+        if use_mc is not None and np.count_nonzero(use_mc):
+            mc_targets = replay_data.mc_returns
             if self.mc_mixing == "convex":
-                mixed = self.mc_prob * replay_data.mc_returns + (1.0 - self.mc_prob) * target_q_values
-                use_mc = known
-            else:
-                mixed = replay_data.mc_returns
-                use_mc = known & mc_drawn
-                if use_sarsa is not None:
-                    # For the statistics: a Sarsa target replaced by the Monte-Carlo one was not used
-                    use_sarsa = use_sarsa & ~use_mc
-            if use_mc.any():
-                target_q_values = th.where(self._mask(use_mc), mixed, target_q_values)
+                mc_targets = self.mc_prob * mc_targets + (1.0 - self.mc_prob) * target_q_values
+            target_q_values = th.where(self._to_device(use_mc), mc_targets, target_q_values)
         return target_q_values, use_mc, use_sarsa
 
-    def _mask(self, mask: np.ndarray) -> th.Tensor:
+    def _to_device(self, array: np.ndarray) -> th.Tensor:
         # from_numpy then to(): a few times cheaper than as_tensor(..., device=...) for a small array on the CPU
-        return th.from_numpy(mask).to(self.device)
+        return th.from_numpy(array).to(self.device)
 
     def _sarsa_known(self, replay_data: OffOnReplayBufferSamples) -> np.ndarray:
         """Where a Sarsa target exists: the next action is known (sampled Sarsa), everywhere (expected Sarsa)."""
@@ -419,15 +416,27 @@ class OffOnDQN(DQN):
             return np.ones(replay_data.next_actions.shape, dtype=bool)
         return replay_data.next_actions.numpy(force=True) >= 0
 
-    def _sarsa_next_values(self, replay_data: OffOnReplayBufferSamples, next_q_values_all: th.Tensor) -> th.Tensor:
-        """Q_target(s', a') for Sarsa (meaningless where the next action is unknown: -1 is read as action 0)."""
+    def _sarsa_next_values(
+        self,
+        replay_data: OffOnReplayBufferSamples,
+        next_q_values_all: th.Tensor,
+        max_next_q_values: th.Tensor,
+        greedy_actions: th.Tensor,
+        use_sarsa: np.ndarray,
+    ) -> th.Tensor:
+        """The values of the next states: Sarsa's where ``use_sarsa``, max_a Q_target(s', a) elsewhere."""
         if self.sarsa_target == "expected":
             # Expectation under the behaviour policy: epsilon-greedy on the online network
-            greedy_actions = self.q_net(replay_data.next_observations).argmax(dim=1, keepdim=True)
-            greedy_values = th.gather(next_q_values_all, dim=1, index=greedy_actions)
+            behaviour_greedy = self.q_net(replay_data.next_observations).argmax(dim=1, keepdim=True)
+            greedy_values = th.gather(next_q_values_all, dim=1, index=behaviour_greedy)
             expected = self.exploration_rate * next_q_values_all.mean(dim=1, keepdim=True)
-            return expected + (1.0 - self.exploration_rate) * greedy_values
-        return th.gather(next_q_values_all, dim=1, index=replay_data.next_actions.clamp(min=0))
+            expected = expected + (1.0 - self.exploration_rate) * greedy_values
+            return th.where(self._to_device(use_sarsa), expected, max_next_q_values)
+        # One gather: at the recorded next action a' for Sarsa, at the target network's greedy action elsewhere (which
+        # reads back exactly the max)
+        greedy = greedy_actions.numpy(force=True).reshape(-1, 1)
+        bootstrap_actions = np.where(use_sarsa, replay_data.next_actions.numpy(force=True), greedy)
+        return th.gather(next_q_values_all, dim=1, index=self._to_device(bootstrap_actions))
 
     def _record_target_statistics(
         self,
