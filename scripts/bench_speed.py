@@ -2,13 +2,18 @@
 Speed benchmark: environment steps per second of OffOnDQN against SB3's DQN at identical hyperparameters.
 
 Both algorithms get the same hyperparameter dict (rl-zoo's tuned DQN settings for the env) and the same seed;
-OffOnDQN keeps its constructor defaults for the Off-On parameters (the paper's delta schedules). The runs alternate
-in one process (DQN first on even repeats, OffOnDQN first on odd ones) so that slow drift in the machine's load
-cancels out. Only ``model.learn()`` is timed; building the model (and its env) is not.
+OffOnDQN keeps its constructor defaults for the Off-On parameters (the paper's delta schedules).
 
-Reported: env steps/s of every run (wall clock, and process CPU time as a cross-check against other load on the
-machine), the median of each algorithm, the ratio OffOnDQN / DQN of the medians, and the ratio of each alternating
-pair with its min and max. The load average (``os.getloadavg()``) is sampled around every run.
+The two runs of a pair take turns in one process: each learn() runs in a thread of its own, and they hand a baton
+to each other every ``--switch-every`` env steps (from a callback), so only one of them computes at any time. A
+machine whose speed drifts (a shared VM's can change by half within minutes) then slows both runs alike, where two
+runs one after the other would each see a different machine. Each run is timed over the intervals in which it held
+the baton (wall clock), and by its thread's CPU time as a cross-check; building the models is not timed. The pairs
+alternate which algorithm starts.
+
+Reported: env steps/s of every run (wall and CPU), the median of each algorithm, the ratio OffOnDQN / DQN of the
+medians, and the ratio of each pair with its min and max; the time spent in train() and in the rest of learn().
+The load average (``os.getloadavg()``) is sampled around every pair.
 
 Usage:
     python scripts/bench_speed.py --env CartPole-v1
@@ -20,8 +25,10 @@ import gc
 import json
 import os
 import platform
+import random
 import statistics
 import subprocess
+import threading
 import time
 from pathlib import Path
 
@@ -30,6 +37,7 @@ import numpy as np
 import stable_baselines3
 import torch as th
 from stable_baselines3 import DQN
+from stable_baselines3.common.callbacks import BaseCallback
 
 import sb3_offon
 from sb3_offon import OffOnDQN
@@ -76,7 +84,10 @@ def parse_args() -> argparse.Namespace:
         default=20_000,
         help="env steps per timed run (default 20000; the zoo trains 50k on CartPole-v1, 100k on LunarLander-v3)",
     )
-    parser.add_argument("--repeats", type=int, default=3, help="number of alternating (DQN, OffOnDQN) pairs")
+    parser.add_argument("--repeats", type=int, default=3, help="number of (DQN, OffOnDQN) pairs")
+    parser.add_argument(
+        "--switch-every", type=int, default=500, help="env steps a run of a pair takes before handing over to the other"
+    )
     parser.add_argument("--seed", type=int, default=0, help="seed of every run (the same for both algorithms)")
     parser.add_argument("--threads", type=int, default=1, help="torch.set_num_threads")
     parser.add_argument(
@@ -89,10 +100,74 @@ def parse_args() -> argparse.Namespace:
     return parser.parse_args()
 
 
-def run_once(algo_class: type[DQN], env_id: str, hyperparams: dict, timesteps: int, seed: int) -> dict:
-    """Build a model (untimed), then time its learn() call."""
+class Baton:
+    """Two threads take turns: one holds the baton and runs, the other waits for it."""
+
+    def __init__(self, first: str, second: str):
+        self.condition = threading.Condition()
+        self.names = (first, second)
+        self.holder = first
+        self.finished: set[str] = set()
+
+    def wait_turn(self, name: str) -> None:
+        with self.condition:
+            self.condition.wait_for(lambda: self.holder == name)
+
+    def hand_over(self, name: str, finished: bool = False) -> None:
+        with self.condition:
+            if finished:
+                self.finished.add(name)
+            other = self.names[1] if name == self.names[0] else self.names[0]
+            if other not in self.finished:
+                self.holder = other
+                self.condition.notify_all()
+
+
+def global_rng_states() -> tuple:
+    return random.getstate(), np.random.get_state(), th.get_rng_state()
+
+
+def set_global_rng_states(states: tuple) -> None:
+    random.setstate(states[0])
+    np.random.set_state(states[1])
+    th.set_rng_state(states[2])
+
+
+class TakeTurns(BaseCallback):
+    """
+    Hands the baton over every ``every`` env steps, and times the intervals in which this run held it.
+
+    SB3 explores and samples with the global RNGs: each run keeps its own states of them across turns (starting from
+    those its model was built with), so that it draws exactly what it would draw running alone.
+    """
+
+    def __init__(self, baton: Baton, name: str, every: int, rng_states: tuple):
+        super().__init__()
+        self.baton, self.name, self.every = baton, name, every
+        self.rng_states = rng_states
+        self.held_seconds = 0.0
+        self.held_since = 0.0
+
+    def take(self) -> None:
+        self.baton.wait_turn(self.name)
+        set_global_rng_states(self.rng_states)
+        self.held_since = time.perf_counter()
+
+    def release(self, finished: bool = False) -> None:
+        self.held_seconds += time.perf_counter() - self.held_since
+        self.rng_states = global_rng_states()
+        self.baton.hand_over(self.name, finished)
+
+    def _on_step(self) -> bool:
+        if self.n_calls % self.every == 0:
+            self.release()
+            self.take()
+        return True
+
+
+def build(algo_class: type[DQN], env_id: str, hyperparams: dict, seed: int) -> tuple[DQN, list[float]]:
+    """A model whose train() time is summed into the returned one-element list."""
     model = algo_class("MlpPolicy", env_id, seed=seed, verbose=0, device="cpu", **hyperparams)
-    # Time train() apart from the rest of learn() (collecting and storing transitions): wrap the bound method
     train_seconds = [0.0]
     untimed_train = model.train
 
@@ -102,35 +177,64 @@ def run_once(algo_class: type[DQN], env_id: str, hyperparams: dict, timesteps: i
         train_seconds[0] += time.perf_counter() - start
 
     model.train = timed_train  # type: ignore[method-assign]
+    return model, train_seconds
+
+
+def run_pair(
+    order: tuple[type[DQN], type[DQN]], env_id: str, hyperparams: dict, timesteps: int, seed: int, every: int
+) -> dict:
+    """Build both models (untimed), then run their learn() calls taking turns; one result dict per algorithm."""
+    names = tuple(algo.__name__ for algo in order)
+    baton = Baton(*names)
+    models, callbacks = {}, {}
+    for name, algo in zip(names, order, strict=True):
+        models[name] = build(algo, env_id, hyperparams, seed)
+        callbacks[name] = TakeTurns(baton, name, every, rng_states=global_rng_states())
+    cpu_seconds = {}
+
+    def learn(name: str) -> None:
+        model, callback = models[name][0], callbacks[name]
+        callback.take()
+        cpu_start = time.thread_time()  # torch runs on this thread (one intra-op thread)
+        try:
+            model.learn(total_timesteps=timesteps, callback=callback)
+        finally:
+            cpu_seconds[name] = time.thread_time() - cpu_start
+            callback.release(finished=True)
+
     gc.collect()
     load_before = os.getloadavg()
-    cpu_start, wall_start = time.process_time(), time.perf_counter()
-    model.learn(total_timesteps=timesteps)
-    wall = time.perf_counter() - wall_start
-    cpu = time.process_time() - cpu_start
+    threads = [threading.Thread(target=learn, args=(name,)) for name in names]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
     load_after = os.getloadavg()
-    steps = model.num_timesteps
-    episode_lengths = model.env.env_method("get_episode_lengths")[0]  # from SB3's Monitor wrapper
-    run = {
-        "algo": algo_class.__name__,
-        "env_steps": steps,
-        "gradient_steps": model._n_updates,
-        "learn_seconds": wall,
-        "cpu_seconds": cpu,
-        "train_seconds": train_seconds[0],
-        "collect_seconds": wall - train_seconds[0],
-        "episodes": len(episode_lengths),
-        "mean_episode_length": float(np.mean(episode_lengths)) if episode_lengths else None,
-        "steps_per_second": steps / wall,
-        "cpu_steps_per_second": steps / cpu,
-        "loadavg_before": load_before,
-        "loadavg_after": load_after,
-    }
-    if isinstance(model, OffOnDQN):
-        run["offon_parameters"] = {name: getattr(model, name) for name in OFFON_PARAMETERS}
-    model.env.close()
-    del model
-    return run
+
+    runs = {}
+    for name in names:
+        model, train_seconds = models[name]
+        wall, steps = callbacks[name].held_seconds, model.num_timesteps
+        episode_lengths = model.env.env_method("get_episode_lengths")[0]  # from SB3's Monitor wrapper
+        runs[name] = {
+            "algo": name,
+            "env_steps": steps,
+            "gradient_steps": model._n_updates,
+            "learn_seconds": wall,
+            "cpu_seconds": cpu_seconds[name],
+            "train_seconds": train_seconds[0],
+            "collect_seconds": wall - train_seconds[0],
+            "episodes": len(episode_lengths),
+            "mean_episode_length": float(np.mean(episode_lengths)) if episode_lengths else None,
+            "steps_per_second": steps / wall,
+            "cpu_steps_per_second": steps / cpu_seconds[name],
+            "loadavg_before": load_before,
+            "loadavg_after": load_after,
+        }
+        if isinstance(model, OffOnDQN):
+            runs[name]["offon_parameters"] = {key: getattr(model, key) for key in OFFON_PARAMETERS}
+        model.env.close()
+    return runs
 
 
 def ratio_summary(dqn_values: list[float], offon_values: list[float]) -> dict:
@@ -149,7 +253,8 @@ def ratio_summary(dqn_values: list[float], offon_values: list[float]) -> dict:
 def markdown_table(result: dict) -> str:
     wall, cpu = result["summary"]["wall"], result["summary"]["cpu"]
     lines = [
-        f"{result['env']}, {result['timesteps']} env steps per run, {result['repeats']} alternating pairs, "
+        f"{result['env']}, {result['timesteps']} env steps per run, {result['repeats']} pairs taking turns every "
+        f"{result['switch_every']} env steps, "
         f"seed {result['seed']}, {result['threads']} torch thread(s), load average "
         f"{result['loadavg_start'][0]:.2f} at start / {result['loadavg_end'][0]:.2f} at end ({result['cpu_count']} CPUs), "
         f"sb3_offon {result['git']}, SB3 {result['versions']['stable_baselines3']}, torch {result['versions']['torch']}",
@@ -202,6 +307,7 @@ if __name__ == "__main__":
         "timesteps": args.timesteps,
         "zoo_timesteps": ZOO_TIMESTEPS[args.env],
         "repeats": args.repeats,
+        "switch_every": args.switch_every,
         "seed": args.seed,
         "threads": args.threads,
         "hyperparams": hyperparams,
@@ -227,16 +333,14 @@ if __name__ == "__main__":
     print(f"load average at start: {result['loadavg_start']} ({result['cpu_count']} CPUs)")
 
     if args.warmup_timesteps > 0:
-        for algo_class in (DQN, OffOnDQN):
-            run_once(algo_class, args.env, hyperparams, args.warmup_timesteps, args.seed)
+        run_pair((DQN, OffOnDQN), args.env, hyperparams, args.warmup_timesteps, args.seed, args.switch_every)
         print(f"warm-up done ({args.warmup_timesteps} steps of each, untimed)")
 
     for repeat in range(args.repeats):
         order = (DQN, OffOnDQN) if repeat % 2 == 0 else (OffOnDQN, DQN)
-        pair = {"repeat": repeat, "order": " then ".join(algo.__name__ for algo in order)}
-        for algo_class in order:
-            run = run_once(algo_class, args.env, hyperparams, args.timesteps, args.seed)
-            pair[run["algo"]] = run
+        pair = {"repeat": repeat, "order": f"{order[0].__name__} starts"}
+        pair.update(run_pair(order, args.env, hyperparams, args.timesteps, args.seed, args.switch_every))
+        for run in (pair["DQN"], pair["OffOnDQN"]):
             print(
                 f"  pair {repeat} {run['algo']:>8}: {run['steps_per_second']:7.1f} steps/s "
                 f"({run['env_steps']} steps, {run['gradient_steps']} gradient steps, {run['learn_seconds']:.1f} s wall, "

@@ -1,0 +1,69 @@
+"""
+``scripts/bench_speed.py``: the two runs of a pair take turns, and each learns exactly what it would learn alone.
+
+No timing is asserted here (that is the benchmark's job); only that taking turns does not change what is measured.
+"""
+
+import hashlib
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+from stable_baselines3 import DQN
+
+from sb3_offon import OffOnDQN
+
+SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "bench_speed.py"
+HYPERPARAMS = dict(
+    learning_starts=100, train_freq=16, gradient_steps=8, batch_size=32, buffer_size=1000, policy_kwargs=dict(net_arch=[16])
+)
+TIMESTEPS = 600
+
+
+def load_script():
+    spec = importlib.util.spec_from_file_location("bench_speed", SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def parameters_digest(model) -> str:
+    return hashlib.sha1(b"".join(p.detach().numpy().tobytes() for p in model.policy.parameters())).hexdigest()
+
+
+def test_runs_taking_turns_learn_what_they_learn_alone(monkeypatch):
+    bench_speed = load_script()
+    # Keep each pair's models, to compare them with runs made alone
+    built = []
+    original_build = bench_speed.build
+
+    def keep(*args, **kwargs):
+        model_and_train_seconds = original_build(*args, **kwargs)
+        built.append(model_and_train_seconds[0])
+        return model_and_train_seconds
+
+    monkeypatch.setattr(bench_speed, "build", keep)
+    # Hand over every 50 steps: a dozen turns each, in the middle of rollouts and of training bursts
+    runs = bench_speed.run_pair((DQN, OffOnDQN), "CartPole-v1", HYPERPARAMS, TIMESTEPS, seed=3, every=50)
+
+    for model in built:
+        alone = type(model)("MlpPolicy", "CartPole-v1", seed=3, device="cpu", **HYPERPARAMS).learn(TIMESTEPS)
+        assert parameters_digest(model) == parameters_digest(alone), type(model).__name__
+        run = runs[type(model).__name__]
+        assert run["env_steps"] == alone.num_timesteps
+        assert run["episodes"] == len(alone.env.env_method("get_episode_lengths")[0])
+        # Each run is timed only while it holds the baton: both times are parts of the pair's elapsed time
+        assert 0 < run["train_seconds"] < run["learn_seconds"]
+        assert np.isfinite(run["steps_per_second"])
+
+
+def test_baton_alternates_and_lets_the_survivor_run_on():
+    bench_speed = load_script()
+    baton = bench_speed.Baton("a", "b")
+    assert baton.holder == "a"
+    baton.hand_over("a")
+    assert baton.holder == "b"
+    baton.hand_over("b", finished=True)
+    assert baton.holder == "a"
+    baton.hand_over("a")
+    assert baton.holder == "a", "the other run has finished: nobody to wait for"
