@@ -276,10 +276,10 @@ def plot_fall_penalty(by_algo: dict[str, list[Run]], reps: int, out: Path, writt
         episodes = np.arange(1, padded.shape[1] + 1)
         ax.plot(episodes, mean, color=COLORS.get(algo), label=f"{label(algo)} ({len(runs)} seeds)", linewidth=1)
         ax.fill_between(episodes, low, high, color=COLORS.get(algo), alpha=0.2, linewidth=0)
-    decorate_fall_penalty(ax, "average over seeds (still training), as the paper's Figure 13")
+    decorate_fall_penalty(ax, "mean over the seeds still training (paper's Fig. 13)")
     save(fig, out / "fall_penalty_average.png", written)
     # Figures 14 and 15: each variant's best and worst seed
-    for which, pick, figure in (("best", 0, "Figure 14"), ("worst", -1, "Figure 15")):
+    for which, pick, figure in (("best", 0, "Fig. 14"), ("worst", -1, "Fig. 15")):
         fig, ax = plt.subplots(figsize=(7, 4.5))
         for algo, runs in by_algo.items():
             run = rank_fall_penalty(runs)[pick]
@@ -293,7 +293,7 @@ def plot_fall_penalty(by_algo: dict[str, list[Run]], reps: int, out: Path, writt
                 linewidth=1,
                 label=f"{label(algo)}: seed {run.seed}, {status}",
             )
-        decorate_fall_penalty(ax, f"{which} seed of each variant, as the paper's {figure}")
+        decorate_fall_penalty(ax, f"{which} seed of each variant (paper's {figure})")
         save(fig, out / f"fall_penalty_{which}.png", written)
 
 
@@ -317,8 +317,8 @@ def nan_mean_ci(values: np.ndarray, reps: int, chunk: int = 200) -> tuple[np.nda
 
 def decorate_fall_penalty(ax: plt.Axes, subtitle: str) -> None:
     ax.axhline(STOP_THRESHOLD, color="grey", linestyle="--", linewidth=1, label=f"stop rule: mean of {STOP_WINDOW} ≥ 490")
+    ax.set_title(f"{FALL_PENALTY}: {subtitle}", fontsize=10)
     ax.set(
-        title=f"{FALL_PENALTY}: {subtitle}",
         xlabel="Training episode",
         ylabel="Score (episode length, steps balanced)",
     )
