@@ -44,9 +44,11 @@ Usage::
 
 import argparse
 import concurrent.futures
+import importlib.metadata
 import importlib.util
 import json
 import os
+import platform
 import shutil
 import socket
 import statistics
@@ -243,6 +245,7 @@ def run_one(spec: dict) -> dict:
         "started": started.isoformat(timespec="seconds"),
         "finished": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "host": socket.gethostname(),
+        "versions": library_versions(),
         "command": ["python", *command],
         "files": files,
     }
@@ -316,11 +319,27 @@ def store(result: dict, root: Path) -> tuple[bool, str]:
     return False, f"FAILED {name} ({reason}) after {result['wall_time_s']:.1f} s, see {folder / 'train.log'}:\n    {tail}"
 
 
+def library_versions() -> dict[str, str]:
+    """Python and the libraries a run's numbers depend on, as installed where the run ran (read without importing)."""
+    versions = {"python": platform.python_version()}
+    for name in ("torch", "stable_baselines3", "gymnasium", "numpy"):
+        try:
+            versions[name] = importlib.metadata.version(name)
+        except importlib.metadata.PackageNotFoundError:
+            versions[name] = "not installed"
+    return versions
+
+
 _CODE_VERSION: dict[str, str] = {}
 
 
 def code_version() -> dict[str, str]:
-    """The git commit of the code that made the results (with ``-dirty`` for uncommitted changes), once per driver."""
+    """
+    The git commit of the code that made the results (with ``-dirty`` for uncommitted changes), once per driver.
+
+    A copy of the working tree without its git folder (another machine's scratch copy, say) has no commit to read:
+    there the environment variable ``SB3_OFFON_COMMIT`` names it, else it is ``"unknown"``.
+    """
     if not _CODE_VERSION:
         repository = hyperparams_dir().parent.parent
 
@@ -332,7 +351,10 @@ def code_version() -> dict[str, str]:
             dirty = git("status", "--porcelain", "--untracked-files=no")
         except OSError:
             commit, dirty = "", ""
-        _CODE_VERSION["commit"] = (commit + ("-dirty" if dirty else "")) if commit else "unknown"
+        if commit:
+            _CODE_VERSION["commit"] = commit + ("-dirty" if dirty else "")
+        else:
+            _CODE_VERSION["commit"] = os.environ.get("SB3_OFFON_COMMIT", "unknown")
     return _CODE_VERSION
 
 

@@ -6,6 +6,7 @@ output is deleted, and ``plot.py`` draws every figure and table from the result 
 Section 4.4 tasks added, for their figures). Each training run costs ~12 s of CPU, mostly the interpreter's imports.
 """
 
+import importlib.metadata
 import importlib.util
 import json
 import subprocess
@@ -63,10 +64,15 @@ def test_dry_run_of_the_tuned_set(tmp_path: Path):
     assert seeds == sorted(seeds)
 
 
-def test_run_order_is_seed_by_seed_longest_first():
-    spec = importlib.util.spec_from_file_location("benchmark_script", SCRIPTS / "benchmark.py")
+def load_script(name: str):
+    spec = importlib.util.spec_from_file_location(f"{name}_script", SCRIPTS / f"{name}.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
+    return module
+
+
+def test_run_order_is_seed_by_seed_longest_first():
+    module = load_script("benchmark")
     grid = [
         {"algo": algo, "env": env, "seed": seed, "n_timesteps": budget}
         for algo in ("a", "b")
@@ -86,10 +92,27 @@ def test_run_order_is_seed_by_seed_longest_first():
     ]
 
 
+def test_code_version_without_git_comes_from_the_environment(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
+    # A copy of the working tree without .git (another machine's scratch copy): the commit is named by the caller
+    module = load_script("benchmark")
+    (tmp_path / "sb3_offon" / "hyperparams").mkdir(parents=True)
+    monkeypatch.setattr(module, "hyperparams_dir", lambda: tmp_path / "sb3_offon" / "hyperparams")
+    monkeypatch.setenv("GIT_CEILING_DIRECTORIES", str(tmp_path))
+    monkeypatch.setenv("SB3_OFFON_COMMIT", "0123abc")
+    assert module.code_version() == {"commit": "0123abc"}
+    module._CODE_VERSION.clear()
+    monkeypatch.delenv("SB3_OFFON_COMMIT")
+    assert module.code_version() == {"commit": "unknown"}
+
+
 def test_local_pool_writes_the_zoo_layout(local_root: Path):
     for folder in run_folders(local_root):
         done = json.loads((folder / "done.json").read_text())
         assert done["returncode"] == 0 and done["wall_time_s"] > 0
+        # Where and with what the run ran: this checkout's commit, this interpreter's libraries
+        assert len(done["code_version"]["commit"].removesuffix("-dirty")) == 40
+        assert done["versions"]["python"] == ".".join(map(str, sys.version_info[:3]))
+        assert done["versions"]["stable_baselines3"] == importlib.metadata.version("stable_baselines3")
         # The paper's epsilon schedule keeps its end step (1919) under the 300-step budget: the whole run
         assert done["spec"]["hyperparams"] == ["exploration_fraction:1"]
         data = evaluations(folder)
@@ -156,9 +179,7 @@ def test_plot_writes_every_figure_and_table(local_root: Path, tmp_path: Path):
 
 
 def test_bootstrap_intervals_are_the_same_at_every_redraw():
-    spec = importlib.util.spec_from_file_location("plot_script", SCRIPTS / "plot.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = load_script("plot")
     values = np.random.default_rng(0).normal(size=(10, 5))
     first = module.mean_ci(values, reps=500)
     np.random.seed(123)  # whatever ran before must not matter (rliable draws from NumPy's global RNG)
