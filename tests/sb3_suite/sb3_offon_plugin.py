@@ -15,12 +15,16 @@ What it does:
   ``OffOnDQN`` cases only; a test with no algorithm parameter is kept if its source names ``DQN``. Every other test
   is deselected. (A ``-k DQN`` filter would miss the tests that build a DQN without it being in their id, such as
   ``test_callbacks.py::test_eval_success_logging``.)
-- Tests listed in ``NOT_BEHAVIOUR`` are deselected, each with its reason: they fail with ``OffOnDQN`` only because
-  they check a name, not a behaviour. Keep this list short and exact; anything else that fails is a bug to fix.
+- Tests listed in ``DQN_RUN_NAME`` run with ``OffOnDQN.learn``'s default ``tb_log_name`` set to ``"DQN"``: they
+  read the tensorboard run folder by the name of ``DQN.learn``'s default (``DQN_1``), while ``OffOnDQN`` names its
+  runs after itself (``OffOnDQN_1``), as every SB3 and sb3-contrib algorithm does. What they check (the events in
+  that run) is then checked for ``OffOnDQN``. Keep this list short and exact; anything else that fails is a bug.
 """
 
+import functools
 import inspect
 import re
+from collections.abc import Iterator
 from typing import Any
 
 import pytest
@@ -31,13 +35,8 @@ from stable_baselines3.dqn.dqn import DQN as SB3_DQN
 
 from sb3_offon import OffOnDQN
 
-# Test node ids (relative to SB3's tests folder, OffOnDQN ids as they read after the swap) -> why deselected.
-NOT_BEHAVIOUR: dict[str, str] = {
-    "test_callbacks.py::test_eval_callback_logs_are_written_with_the_correct_timestep": (
-        "reads the tensorboard run from the folder 'DQN_1', the name of DQN.learn's default tb_log_name; "
-        "OffOnDQN.learn defaults to tb_log_name='OffOnDQN' and writes 'OffOnDQN_1' (the same events)"
-    ),
-}
+# Test node ids (relative to SB3's tests folder) that read the tensorboard run folder "DQN_1" by name
+DQN_RUN_NAME = {"test_callbacks.py::test_eval_callback_logs_are_written_with_the_correct_timestep"}
 
 _NAMES_DQN = re.compile(r"\bDQN\b")
 
@@ -59,7 +58,7 @@ def pytest_addoption(parser: pytest.Parser) -> None:
         "--offon-dqn-only",
         action="store_true",
         default=False,
-        help="keep only the tests that exercise DQN (now OffOnDQN), and deselect the NOT_BEHAVIOUR ones",
+        help="keep only the tests that exercise DQN (now OffOnDQN)",
     )
 
 
@@ -114,8 +113,7 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         return
     selected, deselected = [], []
     for item in items:
-        nodeid = _relative_nodeid(item)
-        if exercises_dqn(item) and nodeid not in NOT_BEHAVIOUR and nodeid.split("[", 1)[0] not in NOT_BEHAVIOUR:
+        if exercises_dqn(item):
             item.add_marker(pytest.mark.sb3_offon)
             selected.append(item)
         else:
@@ -125,9 +123,11 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     items[:] = selected
 
 
-def pytest_terminal_summary(terminalreporter: Any, exitstatus: int, config: pytest.Config) -> None:
-    if not config.getoption("offon_dqn_only"):
-        return
-    terminalreporter.section("sb3_offon: deselected as name checks, not behaviour")
-    for nodeid, reason in NOT_BEHAVIOUR.items():
-        terminalreporter.write_line(f"{nodeid}: {reason}")
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_call(item: pytest.Item) -> Iterator[None]:
+    if _relative_nodeid(item).split("[", 1)[0] not in DQN_RUN_NAME:
+        return (yield)
+    # partialmethod: an explicit tb_log_name of the test still wins
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(OffOnDQN, "learn", functools.partialmethod(OffOnDQN.learn, tb_log_name="DQN"))
+        return (yield)
