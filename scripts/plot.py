@@ -347,7 +347,7 @@ def plot_goal_reaches(by_algo: dict[str, list[Run]], reps: int, out: Path, writt
     for algo, runs in by_algo.items():
         plot_band(ax, grid, goal_counts(runs, grid), algo, reps, f"{len(runs)} seed{'s' * (len(runs) > 1)}")
     ax.set(
-        title=f"{GOAL_BONUS}: goal reaches during training, as the paper's Figure 16",
+        title=f"{GOAL_BONUS}: goal reaches in training (paper's Figure 16)",
         xlabel="Environment steps",
         ylabel="Training episodes that reached the goal",
     )
