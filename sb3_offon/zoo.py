@@ -26,6 +26,7 @@ import rl_zoo3.train as zoo_train
 import rl_zoo3.utils as zoo_utils
 from rl_zoo3.exp_manager import ExperimentManager
 from rl_zoo3.hyperparams_opt import convert_offpolicy_params, sample_dqn_params
+from stable_baselines3 import DQN
 from stable_baselines3.common.base_class import BaseAlgorithm
 
 # Registers CartPoleFallPenalty-v1 and MountainCarGoalBonus-v0 (also done by ``import sb3_offon``)
@@ -36,11 +37,14 @@ from sb3_offon.variants import DQNMC, DQNSarsa
 
 HYPERPARAMS_DIR = Path(__file__).resolve().parent / "hyperparams"
 
-# The names are the contract of the command line and of the log folders (logs/{algo}/...)
+# The names are the contract of the command line and of the log folders (logs/{algo}/...). ``dqn_nstep`` is SB3's own
+# DQN under a name of its own, so that its settings (the zoo's DQN entries plus ``n_steps``) and its logs are apart
+# from plain DQN's. The zoo already registers ``dqn`` and ``qrdqn`` (sb3-contrib); this package bundles their settings.
 ALGOS: dict[str, type[BaseAlgorithm]] = {
     "offon_dqn": OffOnDQN,
     "dqn_mc": DQNMC,
     "dqn_sarsa": DQNSarsa,
+    "dqn_nstep": DQN,
 }
 
 
@@ -166,7 +170,23 @@ def sample_dqn_sarsa_params(trial: optuna.Trial, n_actions: int, n_envs: int, ad
     return _sample_offon_params(trial, n_actions, n_envs, additional_args, mc=False, sarsa=True)
 
 
+def sample_dqn_nstep_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
+    """
+    Sampler for n-step DQN: the zoo's DQN parameters and ``n_steps`` among 3, 5 and 10.
+
+    :param trial: the Optuna trial
+    :param n_actions: number of actions (unused by DQN, part of the zoo's sampler signature)
+    :param n_envs: number of training envs
+    :param additional_args: the zoo's extra arguments (``using_her_replay_buffer``, ``her_kwargs``)
+    :return: the keyword arguments of the algorithm
+    """
+    hyperparams = sample_dqn_params(trial, n_actions, n_envs, additional_args)
+    hyperparams["n_steps"] = trial.suggest_categorical("n_steps", [3, 5, 10])
+    return hyperparams
+
+
 SAMPLERS = {
+    "dqn_nstep": sample_dqn_nstep_params,
     "offon_dqn": sample_offon_dqn_params,
     "dqn_mc": sample_dqn_mc_params,
     "dqn_sarsa": sample_dqn_sarsa_params,

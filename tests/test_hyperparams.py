@@ -11,6 +11,7 @@ import rl_zoo3
 import yaml
 from rl_zoo3.exp_manager import ExperimentManager
 from rl_zoo3.hyperparams_opt import HYPERPARAMS_CONVERTER, HYPERPARAMS_SAMPLER
+from sb3_contrib import QRDQN
 from stable_baselines3 import DQN
 
 from sb3_offon import OffOnDQN
@@ -21,7 +22,11 @@ from sb3_offon.zoo import ALGOS, HYPERPARAMS_DIR, SAMPLERS, register, resolve_co
 
 register()
 
-CLASSES = {"offon_dqn": OffOnDQN, "dqn_mc": DQNMC, "dqn_sarsa": DQNSarsa, "dqn": DQN}
+PAPER_CLASSES = {"offon_dqn": OffOnDQN, "dqn_mc": DQNMC, "dqn_sarsa": DQNSarsa, "dqn": DQN}
+# The baselines of issue 13 have entries for the four benchmark tasks only
+BASELINE_CLASSES = {"dqn_nstep": DQN, "qrdqn": QRDQN}
+CLASSES = {**PAPER_CLASSES, **BASELINE_CLASSES}
+BASELINE_ENVS = {"default", "atari", "CartPole-v1", "MountainCar-v0", "LunarLander-v3", "Acrobot-v1"}
 REQUIRED_ENVS = {
     "CartPole-v1",
     "MountainCar-v0",
@@ -53,17 +58,31 @@ def load(path: Path) -> dict[str, Any]:
 def entries() -> list[tuple[str, str, str]]:
     """Every (file set, algo, entry) pair: the main files and the paper's."""
     pairs = []
-    for folder, name in ((HYPERPARAMS_DIR, "main"), (HYPERPARAMS_DIR / "paper", "paper")):
-        for algo in CLASSES:
+    for folder, name, algos in ((HYPERPARAMS_DIR, "main", CLASSES), (HYPERPARAMS_DIR / "paper", "paper", PAPER_CLASSES)):
+        for algo in algos:
             pairs += [(name, algo, entry) for entry in load(folder / f"{algo}.yml")]
     return pairs
 
 
 @pytest.mark.parametrize("folder", [HYPERPARAMS_DIR, HYPERPARAMS_DIR / "paper"])
 def test_every_algorithm_has_its_entries(folder: Path) -> None:
-    assert sorted(path.stem for path in folder.glob("*.yml")) == sorted(CLASSES)
-    for algo in CLASSES:
+    algos = CLASSES if folder == HYPERPARAMS_DIR else PAPER_CLASSES
+    assert sorted(path.stem for path in folder.glob("*.yml")) == sorted(algos)
+    for algo in PAPER_CLASSES:
         assert set(load(folder / f"{algo}.yml")) >= (REQUIRED_ENVS if folder == HYPERPARAMS_DIR else PAPER_ENVS), algo
+    if folder == HYPERPARAMS_DIR:
+        for algo in BASELINE_CLASSES:
+            assert set(load(folder / f"{algo}.yml")) == BASELINE_ENVS, algo
+
+
+def test_baselines_are_the_zoo_settings() -> None:
+    """n-step DQN is the zoo's DQN entry plus n_steps; QR-DQN the zoo's own tuned entries, unchanged."""
+    dqn = load(HYPERPARAMS_DIR / "dqn.yml")
+    for env_id, entry in load(HYPERPARAMS_DIR / "dqn_nstep.yml").items():
+        assert entry["n_steps"] in (3, 5, 10), env_id
+        assert {key: value for key, value in entry.items() if key != "n_steps"} == dqn[env_id], env_id
+    zoo = load(Path(rl_zoo3.__file__).parent / "hyperparams" / "qrdqn.yml")
+    assert load(HYPERPARAMS_DIR / "qrdqn.yml") == {env_id: zoo[env_id] for env_id in BASELINE_ENVS}
 
 
 @pytest.mark.parametrize("algo", ["offon_dqn", "dqn_mc", "dqn_sarsa"])
@@ -99,7 +118,7 @@ def test_paper_delta_settings(algo: str, expected: dict[str, float]) -> None:
 
 
 def test_paper_settings() -> None:
-    for algo in CLASSES:
+    for algo in PAPER_CLASSES:
         for env_id, entry in load(HYPERPARAMS_DIR / "paper" / f"{algo}.yml").items():
             assert entry["policy_kwargs"] == "dict(net_arch=[24, 24], activation_fn=nn.ReLU)"
             assert (entry["gamma"], entry["learning_rate"], entry["batch_size"]) == (0.95, 1e-3, 64)
@@ -135,6 +154,8 @@ def build(algo: str, env_id: str, config: Path, log_folder: Path) -> tuple[Any, 
 @pytest.mark.parametrize("file_set, algo, entry", entries())
 def test_every_entry_builds_a_model(tmp_path: Path, file_set: str, algo: str, entry: str) -> None:
     if entry == "atari":
+        if algo == "qrdqn":
+            pytest.skip("the zoo's QR-DQN Atari entry keeps QRDQN's default 1M-frame buffer: 26 GiB to build")
         if not HAS_ALE:
             pytest.skip("ale-py is not installed")
         env_id = "BreakoutNoFrameskip-v4"
@@ -171,7 +192,11 @@ def test_sampler(algo: str) -> None:
         sampled = HYPERPARAMS_SAMPLER[algo](trial, 0, 1, {"using_her_replay_buffer": False, "her_kwargs": {}})
         # What `--trial-id` reloads from a study is what the trial ran with
         assert HYPERPARAMS_CONVERTER[algo](trial.params) == sampled
-        assert {"gamma", "learning_rate", "batch_size", "target_update_interval", "loss"} <= set(sampled)
+        assert {"gamma", "learning_rate", "batch_size", "target_update_interval"} <= set(sampled)
+        if algo == "dqn_nstep":
+            assert sampled["n_steps"] in (3, 5, 10)
+            continue
+        assert "loss" in sampled
         has_mc = {"mc_initial_prob", "mc_final_prob", "mc_fraction", "mc_mixing", "mc_truncation"} <= set(sampled)
         has_sarsa = {"qlearning_initial_prob", "qlearning_final_prob", "qlearning_fraction", "sarsa_target"} <= set(sampled)
         # A variant's fixed probability is not sampled

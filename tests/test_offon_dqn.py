@@ -79,7 +79,7 @@ def targets_at(model: OffOnDQN, data, mc: float, qlearning: float, seed: int = 0
     model.mc_prob, model.qlearning_prob = mc, qlearning
     uniforms = np.random.default_rng(seed).random((2, len(data.rewards), 1), dtype=np.float32)
     with th.no_grad():
-        targets, use_mc, use_sarsa = model._targets(data, uniforms[0] < mc, uniforms[1] >= qlearning)
+        targets, use_mc, use_sarsa, _ = model._targets(data, uniforms[0] < mc, uniforms[1] >= qlearning)
     return targets, mask_tensor(use_mc), mask_tensor(use_sarsa)
 
 
@@ -142,6 +142,39 @@ def test_convex_mixing(model):
     known = ~th.isnan(data.mc_returns)
     th.testing.assert_close(targets[known], 0.25 * data.mc_returns[known] + 0.75 * qlearning[known])
     th.testing.assert_close(targets[~known], qlearning[~known])
+
+
+def test_max_mixing_uses_the_return_as_a_lower_bound(model):
+    data = crafted_batch(model)
+    qlearning, sarsa, _ = reference_targets(model, data)
+    # Returns around the TD targets, so that the bound is above them for some samples and below for others
+    data = data._replace(mc_returns=qlearning + th.linspace(-1.0, 1.0, len(qlearning)).reshape(-1, 1))
+    data.mc_returns[::3] = float("nan")
+    model.mc_mixing = "max"
+    model.mc_prob, model.qlearning_prob = 1.0, 1.0
+    try:
+        all_drawn = np.ones((len(qlearning), 1), dtype=bool)
+        with th.no_grad():
+            targets, use_mc, use_sarsa, bound_active = model._targets(data, all_drawn, ~all_drawn)
+        # Half drawn for MC: the others keep their TD target (here Sarsa where a' is known), whatever G says
+        half = np.arange(len(qlearning)).reshape(-1, 1) % 2 == 0
+        model.qlearning_prob = 0.0
+        with th.no_grad():
+            mixed, _, use_sarsa_mixed, _ = model._targets(data, half, all_drawn)
+    finally:
+        model.mc_mixing = "sample"
+    known = ~th.isnan(data.mc_returns)
+    above = known & (data.mc_returns > qlearning)
+    th.testing.assert_close(targets[above], data.mc_returns[above])
+    th.testing.assert_close(targets[~above], qlearning[~above])
+    assert th.equal(bound_active.cpu(), above)
+    assert use_sarsa is None and th.equal(th.as_tensor(use_mc), known)
+    # With Sarsa in play, a sample drawn for MC keeps its Sarsa draw: y = max(G, y_Sarsa)
+    drawn = th.as_tensor(half) & known
+    td = th.where(th.as_tensor(use_sarsa_mixed), sarsa, qlearning)
+    th.testing.assert_close(mixed[drawn], th.maximum(data.mc_returns, td)[drawn])
+    th.testing.assert_close(mixed[~drawn], td[~drawn])
+    assert bool(th.as_tensor(use_sarsa_mixed)[drawn].any()), "MC-drawn samples keep their Sarsa targets"
 
 
 def test_random_choice_follows_the_probabilities(model):
@@ -463,6 +496,12 @@ def test_target_statistics_by_hand():
     returns = [th.tensor([[0.0], [float("nan")]]), th.tensor([[float("nan")], [1.0]])]
     model._record_target_statistics([1.0, 3.0], q_taken, returns, n_mc_targets=1, n_sarsa_targets=2)
     model.logger.dump()
+    assert "train/mc_bound_active_fraction" not in writer.records[-1], "only logged for mc_mixing='max'"
+    model.mc_mixing = "max"
+    model._record_target_statistics([1.0, 3.0], q_taken, returns, 1, 2, n_bound_active=th.tensor(1))
+    model.logger.dump()
+    assert writer.records[-1]["train/mc_bound_active_fraction"] == pytest.approx(0.25)
+    model.mc_mixing = "sample"
     record = writer.records[-1]
     assert record["train/loss"] == pytest.approx(2.0)
     assert record["train/mc_target_fraction"] == pytest.approx(0.25)

@@ -24,7 +24,7 @@ from sb3_offon.offon_dqn.policies import CnnPolicy, MlpPolicy, MultiInputPolicy
 
 SelfOffOnDQN = TypeVar("SelfOffOnDQN", bound="OffOnDQN")
 
-MC_MIXING_OPTIONS = ("sample", "convex")
+MC_MIXING_OPTIONS = ("sample", "convex", "max")
 SARSA_TARGET_OPTIONS = ("sampled", "expected")
 MC_TRUNCATION_OPTIONS = ("bootstrap", "terminal")
 LOSS_FUNCTIONS = {"huber": F.smooth_l1_loss, "mse": F.mse_loss}
@@ -104,7 +104,11 @@ class OffOnDQN(DQN):
     :param qlearning_fraction: fraction of the training period over which delta2 goes from initial to final
     :param mc_mixing: ``"sample"`` draws the Monte-Carlo target with probability delta1 (the paper);
         ``"convex"`` uses y = delta1 * G + (1 - delta1) * y_TD where G is known (mixed Monte-Carlo,
-        Ostrovski et al. 2017; Hausknecht & Stone 2016)
+        Ostrovski et al. 2017; Hausknecht & Stone 2016); ``"max"`` uses the return as a lower bound,
+        y = max(G, y_TD), where the delta1 draw picks it and G is known (MCAC, Wilcox et al. 2022; Optimality
+        Tightening, He et al. 2017; Self-Imitation Learning, Oh et al. 2018). In a deterministic environment any
+        observed return after (s, a) is achievable, so it bounds Q* from below however old the policy that earned it;
+        in a stochastic one it is optimistic.
     :param sarsa_target: ``"sampled"`` bootstraps from the recorded next action (Q-learning where it is unknown);
         ``"expected"`` from the expectation under the current epsilon-greedy policy (Expected Sarsa)
     :param mc_truncation: return after a time-limit truncation: ``"bootstrap"``, gamma * max_a Q_target(s_T, a)
@@ -338,12 +342,18 @@ class OffOnDQN(DQN):
         mc_drawn, sarsa_drawn = uniforms[0] < self.mc_prob, uniforms[1] >= self.qlearning_prob
         losses, q_taken, mc_returns = [], [], []
         n_mc_targets = n_sarsa_targets = 0
+        # Samples whose target the Monte-Carlo bound decided (mc_mixing="max"), summed on the device
+        n_bound_active = th.zeros((), dtype=th.long, device=self.device)
         # Listed once per call rather than walking the policy's modules at each step as SB3's DQN does (same clipping)
         parameters = list(self.policy.parameters())
         for step in range(gradient_steps):
             replay_data: OffOnReplayBufferSamples = self.replay_buffer.sample(batch_size, env=self._vec_normalize_env)  # type: ignore[assignment]
             with th.no_grad():
-                target_q_values, use_mc, use_sarsa = self._targets(replay_data, mc_drawn[step], sarsa_drawn[step])
+                target_q_values, use_mc, use_sarsa, bound_active = self._targets(
+                    replay_data, mc_drawn[step], sarsa_drawn[step]
+                )
+                if bound_active is not None:
+                    n_bound_active += bound_active.sum()
 
             current_q_values = self.q_net(replay_data.observations)
             current_q_values = th.gather(current_q_values, dim=1, index=replay_data.actions.long())
@@ -363,11 +373,11 @@ class OffOnDQN(DQN):
 
         self._n_updates += gradient_steps
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
-        self._record_target_statistics(losses, q_taken, mc_returns, n_mc_targets, n_sarsa_targets)
+        self._record_target_statistics(losses, q_taken, mc_returns, n_mc_targets, n_sarsa_targets, n_bound_active)
 
     def _targets(
         self, replay_data: OffOnReplayBufferSamples, mc_drawn: np.ndarray, sarsa_drawn: np.ndarray
-    ) -> tuple[th.Tensor, np.ndarray | None, np.ndarray | None]:
+    ) -> tuple[th.Tensor, np.ndarray | None, np.ndarray | None, th.Tensor | None]:
         """
         The regression targets of one minibatch.
 
@@ -378,9 +388,11 @@ class OffOnDQN(DQN):
         :param replay_data: the minibatch
         :param mc_drawn: per sample, whether the draw picked the Monte-Carlo target (used where G is known)
         :param sarsa_drawn: per sample, whether the draw picked Sarsa over Q-learning (used where a' is known)
-        :return: the targets, and the masks of samples whose target is Monte-Carlo and Sarsa (None: not drawn at all)
+        :return: the targets, the masks of samples whose target is Monte-Carlo and Sarsa (None: not drawn at all), and
+            (``mc_mixing="max"``) the mask, on the device, of samples where the return was above the TD target
         """
         use_mc = use_sarsa = None
+        bound_active = None
         if self.mc_prob > 0.0:
             known_return = ~np.isnan(replay_data.mc_returns.numpy(force=True))
             use_mc = known_return if self.mc_mixing == "convex" else known_return & mc_drawn
@@ -401,10 +413,15 @@ class OffOnDQN(DQN):
 
         if use_mc is not None and np.count_nonzero(use_mc):
             mc_targets = replay_data.mc_returns
+            use_mc_tensor = self._to_device(use_mc)
             if self.mc_mixing == "convex":
                 mc_targets = self.mc_prob * mc_targets + (1.0 - self.mc_prob) * target_q_values
-            target_q_values = th.where(self._to_device(use_mc), mc_targets, target_q_values)
-        return target_q_values, use_mc, use_sarsa
+            elif self.mc_mixing == "max":
+                # The return as a lower bound: it decides the target only where it is above the TD target
+                bound_active = use_mc_tensor & (mc_targets > target_q_values)
+                mc_targets = th.maximum(mc_targets, target_q_values)
+            target_q_values = th.where(use_mc_tensor, mc_targets, target_q_values)
+        return target_q_values, use_mc, use_sarsa, bound_active
 
     def _to_device(self, array: np.ndarray) -> th.Tensor:
         # from_numpy then to(): a few times cheaper than as_tensor(..., device=...) for a small array on the CPU
@@ -445,11 +462,14 @@ class OffOnDQN(DQN):
         mc_returns: list[th.Tensor],
         n_mc_targets: int,
         n_sarsa_targets: int,
+        n_bound_active: th.Tensor | int = 0,
     ) -> None:
         returns = th.cat(mc_returns).numpy(force=True)
         self.logger.record("train/loss", np.mean(losses))
         self.logger.record("train/mc_target_fraction", n_mc_targets / len(returns))
         self.logger.record("train/sarsa_target_fraction", n_sarsa_targets / len(returns))
+        if self.mc_mixing == "max":
+            self.logger.record("train/mc_bound_active_fraction", int(n_bound_active) / len(returns))
         # NaN where G is unknown: those samples drop out of the mean
         gaps = th.cat(q_taken).numpy(force=True) - returns
         known = gaps == gaps

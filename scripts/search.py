@@ -1,0 +1,259 @@
+"""
+The search of issue 13: which Off-On configuration, and which ``n_steps`` for the n-step DQN baseline, on seeds 0-4.
+
+The candidates, the tasks and the criterion are fixed here, before any run of the search (and written to
+``results/search/README.md`` with the outcome, losers included):
+
+- DQN settings: the zoo's tuned entries, unchanged (``hyperparams/dqn.yml``); only the target options vary.
+- Off-On candidates (``mc_mixing``, the delta1 and delta2 schedules) on CartPole-v1, MountainCar-v0, LunarLander-v3,
+  Acrobot-v1 and the stochastic FrozenLake-v1 (slippery), where a Monte-Carlo lower bound can mislead.
+- n-step DQN: ``n_steps`` in 3, 5, 10 on the four benchmark tasks, chosen per task by the mean AUC.
+- Criterion for the one Off-On configuration used on every task: among the candidates whose mean final return is, on
+  every task, no more than 2% of the task's score range below DQN's ("never below DQN", with room for the noise of
+  5 seeds), the highest mean over the five tasks of the normalised AUC (fixed per-task ranges below).
+
+Runs that the earlier grids already made with the same settings and seeds (the tuned set: DQN, Off-On DQN and DQN with
+MC on the four benchmark tasks) are read from there, not redone. New runs go to
+``results/raw/search/<candidate>/tuned/<algo>/<env>_<seed>/`` through ``scripts/benchmark.py``'s own functions, so they
+resume as the benchmark does.
+
+Usage::
+
+    python scripts/search.py run --workers 2                 # every missing run of the search
+    python scripts/search.py run --candidates max_always --envs FrozenLake-v1
+    python scripts/search.py report                          # results/search/summary.md from the finished runs
+"""
+
+import argparse
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import benchmark
+
+SEARCH_ROOT = Path("results/raw/search")
+TUNED_ROOT = Path("results/raw/tuned")
+TUNING_SEEDS = [0, 1, 2, 3, 4]
+BENCHMARK_ENVS = ["CartPole-v1", "MountainCar-v0", "LunarLander-v3", "Acrobot-v1"]
+STOCHASTIC_ENV = "FrozenLake-v1"
+OFFON_ENVS = [*BENCHMARK_ENVS, STOCHASTIC_ENV]
+# FrozenLake's return is 0 or 1: 50 episodes per evaluation, not 10, to see a success rate
+EVAL_EPISODES = {STOCHASTIC_ENV: 50}
+# Fixed score ranges for the normalisation (stated before the search): about a random policy's score to a solved one's
+SCORE_RANGES = {
+    "CartPole-v1": (0.0, 500.0),
+    "MountainCar-v0": (-200.0, -100.0),
+    "LunarLander-v3": (-250.0, 250.0),
+    "Acrobot-v1": (-500.0, -60.0),
+    "FrozenLake-v1": (0.0, 1.0),
+}
+# "Never below DQN": a mean final return at most this share of the task's range below DQN's
+TOLERANCE = 0.02
+
+
+@dataclass
+class Candidate:
+    name: str
+    algo: str
+    hyperparams: list[str] = field(default_factory=list)
+    envs: list[str] = field(default_factory=lambda: list(OFFON_ENVS))
+    # Runs of the tuned grid made with exactly these settings (no overrides): read from there on these envs
+    reuse_tuned: bool = False
+    description: str = ""
+
+
+MAX = "mc_mixing:'max'"
+CANDIDATES = [
+    Candidate("dqn", "dqn", reuse_tuned=True, description="SB3's DQN, the zoo's settings (the reference)"),
+    Candidate(
+        "paper", "offon_dqn", reuse_tuned=True, description="the paper: one target drawn, delta1 and delta2 0.99 -> 0.01"
+    ),
+    Candidate("mc_sample", "dqn_mc", reuse_tuned=True, description="DQN with MC: delta1 0.99 -> 0.01, no Sarsa"),
+    Candidate("max_paper", "offon_dqn", [MAX], description="lower bound max(G, y_TD), the paper's schedules"),
+    Candidate("max_qlearning", "dqn_mc", [MAX], description="lower bound, delta1 0.99 -> 0.01, no Sarsa"),
+    Candidate(
+        "max_always",
+        "dqn_mc",
+        [MAX, "mc_initial_prob:1.0", "mc_final_prob:1.0"],
+        description="lower bound wherever G is known (MCAC), no Sarsa",
+    ),
+    *[
+        Candidate(f"nstep{n}", "dqn_nstep", [f"n_steps:{n}"], envs=list(BENCHMARK_ENVS), description=f"SB3's DQN, n_steps={n}")
+        for n in (3, 5, 10)
+    ],
+]
+BY_NAME = {candidate.name: candidate for candidate in CANDIDATES}
+OFFON_CANDIDATES = [candidate.name for candidate in CANDIDATES if candidate.algo != "dqn_nstep"]
+
+
+def candidate_root(candidate: Candidate, env: str) -> Path:
+    """Where the candidate's runs on ``env`` live: the tuned grid's, or the search's own folder."""
+    if candidate.reuse_tuned and env in BENCHMARK_ENVS:
+        return TUNED_ROOT.parent
+    return SEARCH_ROOT / candidate.name
+
+
+def specs_of(candidate: Candidate, envs: list[str], seeds: list[int], device: str) -> list[tuple[dict, Path]]:
+    """The benchmark specs of a candidate's runs, each with its results root."""
+    pairs = []
+    for env in envs:
+        argv = ["--set", "tuned", "--algos", candidate.algo, "--envs", env, "--seeds", *map(str, seeds)]
+        argv += ["--eval-episodes", str(EVAL_EPISODES.get(env, 10)), "--device", device]
+        if candidate.hyperparams:
+            argv += ["--hyperparams", *candidate.hyperparams]
+        root = candidate_root(candidate, env)
+        pairs += [(spec, root) for spec in benchmark.build_specs(benchmark.parse_args(argv))]
+    return pairs
+
+
+def run(args: argparse.Namespace) -> int:
+    pairs = []
+    for name in args.candidates:
+        candidate = BY_NAME[name]
+        envs = [env for env in candidate.envs if env in args.envs]
+        pairs += specs_of(candidate, envs, args.seeds, args.device)
+    todo, conflicts = [], []
+    for spec, root in pairs:
+        status = benchmark.run_status(benchmark.run_dir(root, spec), spec)
+        if status == "conflict":
+            conflicts.append(benchmark.run_dir(root, spec))
+        elif status == "todo":
+            todo.append((spec, root))
+    if conflicts:
+        print("Finished runs with other settings (not redone):\n  " + "\n  ".join(map(str, conflicts)), file=sys.stderr)
+        return 2
+    print(f"{len(pairs)} runs in the search, {len(pairs) - len(todo)} finished, {len(todo)} to run on {args.workers} workers")
+    if args.dry_run:
+        for spec, root in todo:
+            print(benchmark.run_dir(root, spec), " ".join(spec["hyperparams"]))
+        return 0
+    # Every spec is its own dict: the result's spec identifies its root
+    roots = {id(spec): root for spec, root in todo}
+    ordered = benchmark.run_order([spec for spec, _ in todo])
+    failures = 0
+    for result in benchmark.run_local(ordered, args.workers):
+        spec = next(spec for spec in ordered if spec is result["spec"])
+        ok, message = benchmark.store(result, roots[id(spec)])
+        failures += not ok
+        print(message, flush=True)
+    return 1 if failures else 0
+
+
+# ----------------------------------------------------------------------------------------------------------------------
+# Report
+# ----------------------------------------------------------------------------------------------------------------------
+def run_scores(folder: Path, last: int = 3) -> tuple[float, float] | None:
+    """Final return (mean of the last ``last`` evaluations) and AUC (mean evaluation return over training) of a run."""
+    evaluations = benchmark.read_evaluations(folder)
+    if evaluations is None or not (folder / benchmark.DONE).is_file():
+        return None
+    steps, returns = evaluations["timesteps"].astype(float), evaluations["results"].mean(axis=1)
+    auc = np.trapezoid(returns, steps) / (steps[-1] - steps[0]) if len(steps) > 1 else returns[0]
+    return float(returns[-last:].mean()), float(auc)
+
+
+def collect(candidate: Candidate, env: str) -> np.ndarray:
+    """(seeds, 2): final return and AUC of each finished tuning-seed run (fewer rows while runs are missing)."""
+    rows = []
+    for seed in TUNING_SEEDS:
+        folder = candidate_root(candidate, env) / "tuned" / candidate.algo / f"{env}_{seed}"
+        scores = run_scores(folder)
+        if scores is not None:
+            rows.append(scores)
+    return np.array(rows).reshape(-1, 2)
+
+
+def normalise(env: str, value: np.ndarray | float) -> np.ndarray | float:
+    low, high = SCORE_RANGES[env]
+    return (value - low) / (high - low)
+
+
+def report(args: argparse.Namespace) -> int:
+    scores = {name: {env: collect(BY_NAME[name], env) for env in BY_NAME[name].envs} for name in BY_NAME}
+    lines = [
+        "# Search of issue 13: every candidate on the tuning seeds 0-4",
+        "",
+        "Generated by `python scripts/search.py report` from the finished runs. Final return: mean of the last 3 "
+        "evaluations; AUC: mean evaluation return over training (trapezoid); both averaged over the finished seeds "
+        "(the count is given). Normalised with the fixed ranges "
+        + ", ".join(f"{env} {r}" for env, r in SCORE_RANGES.items())
+        + ".",
+        "",
+        "## Off-On configurations",
+        "",
+        "| Candidate | Settings | "
+        + " | ".join(f"{env} final / AUC (n)" for env in OFFON_ENVS)
+        + " | Mean normalised AUC | Never below DQN |",
+        "|---|---|" + "---|" * len(OFFON_ENVS) + "---|---|",
+    ]
+    dqn_final = {env: scores["dqn"][env][:, 0].mean() if len(scores["dqn"][env]) else np.nan for env in OFFON_ENVS}
+    ranking = []
+    for name in OFFON_CANDIDATES:
+        cells, normalised_auc, eligible, complete = [], [], True, True
+        for env in OFFON_ENVS:
+            values = scores[name][env]
+            complete &= len(values) == len(TUNING_SEEDS)
+            if not len(values):
+                cells.append("—")
+                complete = False
+                continue
+            final, auc = values.mean(axis=0)
+            cells.append(f"{final:.3g} / {auc:.3g} ({len(values)})")
+            normalised_auc.append(normalise(env, auc))
+            low, high = SCORE_RANGES[env]
+            eligible &= bool(final >= dqn_final[env] - TOLERANCE * (high - low))
+        mean_auc = float(np.mean(normalised_auc)) if normalised_auc else np.nan
+        settings = BY_NAME[name].description
+        verdict = ("yes" if eligible else "no") if complete else ("no" if not eligible else "pending")
+        lines.append(f"| {name} | {settings} | " + " | ".join(cells) + f" | {mean_auc:.3f} | {verdict} |")
+        if complete:
+            ranking.append((eligible, mean_auc, name))
+    lines += ["", "## n-step DQN", "", "| Task | " + " | ".join(f"n={n} final / AUC (n)" for n in (3, 5, 10)) + " | Chosen |"]
+    lines.append("|---|---|---|---|---|")
+    for env in BENCHMARK_ENVS:
+        cells, best = [], None
+        for n in (3, 5, 10):
+            values = scores[f"nstep{n}"][env]
+            if len(values):
+                final, auc = values.mean(axis=0)
+                cells.append(f"{final:.3g} / {auc:.3g} ({len(values)})")
+                if len(values) == len(TUNING_SEEDS) and (best is None or auc > best[0]):
+                    best = (auc, n)
+            else:
+                cells.append("—")
+        complete = all(len(scores[f"nstep{n}"][env]) == len(TUNING_SEEDS) for n in (3, 5, 10))
+        lines.append(f"| {env} | " + " | ".join(cells) + f" | {best[1] if complete and best else 'pending'} |")
+    lines.append("")
+    winners = sorted((auc, name) for eligible, auc, name in ranking if eligible)
+    if len(ranking) == len(OFFON_CANDIDATES):
+        lines.append(f"**Winner** (highest mean normalised AUC among the eligible): {winners[-1][1] if winners else 'none'}")
+    else:
+        lines.append(f"**Winner: pending** ({len(ranking)} of {len(OFFON_CANDIDATES)} Off-On candidates complete)")
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    commands = parser.add_subparsers(dest="command", required=True)
+    run_parser = commands.add_parser("run", help="train the missing runs of the search")
+    run_parser.add_argument("--candidates", nargs="+", default=list(BY_NAME), choices=list(BY_NAME))
+    run_parser.add_argument("--envs", nargs="+", default=OFFON_ENVS)
+    run_parser.add_argument("--seeds", nargs="+", type=int, default=TUNING_SEEDS)
+    run_parser.add_argument("--workers", type=int, default=2)
+    run_parser.add_argument("--device", default="cpu")
+    run_parser.add_argument("--dry-run", action="store_true")
+    report_parser = commands.add_parser("report", help="write the summary of the finished runs")
+    report_parser.add_argument("--out", default="results/search/summary.md")
+    args = parser.parse_args(argv)
+    return run(args) if args.command == "run" else report(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
