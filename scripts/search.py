@@ -89,14 +89,16 @@ BY_NAME = {candidate.name: candidate for candidate in CANDIDATES}
 OFFON_CANDIDATES = [candidate.name for candidate in CANDIDATES if candidate.algo != "dqn_nstep"]
 
 
-def candidate_root(candidate: Candidate, env: str) -> Path:
+def candidate_root(candidate: Candidate, env: str, search_root: Path = SEARCH_ROOT) -> Path:
     """Where the candidate's runs on ``env`` live: the tuned grid's, or the search's own folder."""
     if candidate.reuse_tuned and env in BENCHMARK_ENVS:
         return TUNED_ROOT.parent
-    return SEARCH_ROOT / candidate.name
+    return search_root / candidate.name
 
 
-def specs_of(candidate: Candidate, envs: list[str], seeds: list[int], device: str) -> list[tuple[dict, Path]]:
+def specs_of(
+    candidate: Candidate, envs: list[str], seeds: list[int], device: str, search_root: Path
+) -> list[tuple[dict, Path]]:
     """The benchmark specs of a candidate's runs, each with its results root."""
     pairs = []
     for env in envs:
@@ -104,7 +106,7 @@ def specs_of(candidate: Candidate, envs: list[str], seeds: list[int], device: st
         argv += ["--eval-episodes", str(EVAL_EPISODES.get(env, 10)), "--device", device]
         if candidate.hyperparams:
             argv += ["--hyperparams", *candidate.hyperparams]
-        root = candidate_root(candidate, env)
+        root = candidate_root(candidate, env, search_root)
         pairs += [(spec, root) for spec in benchmark.build_specs(benchmark.parse_args(argv))]
     return pairs
 
@@ -114,7 +116,7 @@ def run(args: argparse.Namespace) -> int:
     for name in args.candidates:
         candidate = BY_NAME[name]
         envs = [env for env in candidate.envs if env in args.envs]
-        pairs += specs_of(candidate, envs, args.seeds, args.device)
+        pairs += specs_of(candidate, envs, args.seeds, args.device, args.search_root)
     todo, conflicts = [], []
     for spec, root in pairs:
         status = benchmark.run_status(benchmark.run_dir(root, spec), spec)
@@ -248,6 +250,7 @@ def main(argv: list[str] | None = None) -> int:
     run_parser.add_argument("--seeds", nargs="+", type=int, default=TUNING_SEEDS)
     run_parser.add_argument("--workers", type=int, default=2)
     run_parser.add_argument("--device", default="cpu")
+    run_parser.add_argument("--search-root", type=Path, default=SEARCH_ROOT, help="where new runs go (another machine's slice)")
     run_parser.add_argument("--dry-run", action="store_true")
     report_parser = commands.add_parser("report", help="write the summary of the finished runs")
     report_parser.add_argument("--out", default="results/search/summary.md")
