@@ -250,7 +250,7 @@ def main(argv: list[str] | None = None) -> int:
     run_parser.add_argument("--seeds", nargs="+", type=int, default=TUNING_SEEDS)
     run_parser.add_argument("--workers", type=int, default=2)
     run_parser.add_argument("--device", default="cpu")
-    run_parser.add_argument("--search-root", type=Path, default=SEARCH_ROOT, help="where new runs go (another machine's slice)")
+    run_parser.add_argument("--search-root", type=Path, default=SEARCH_ROOT, help="where new runs go")
     run_parser.add_argument("--dry-run", action="store_true")
     report_parser = commands.add_parser("report", help="write the summary of the finished runs")
     report_parser.add_argument("--out", default="results/search/summary.md")
