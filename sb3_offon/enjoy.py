@@ -11,10 +11,9 @@ Example::
 
 from typing import Any
 
-import rl_zoo3.enjoy as zoo_enjoy
 from stable_baselines3.common.base_class import BaseAlgorithm
 
-from sb3_offon.zoo import ALGOS, register
+from sb3_offon.extras import zoo_required
 
 
 class ReplayLoader:
@@ -48,9 +47,17 @@ class ReplayLoader:
 
 def main() -> None:
     """Register the algorithms, then run the zoo's ``enjoy`` command line on ``sys.argv``."""
+    # Imported here, not at the top: without the zoo extra, a one-line hint instead of a traceback
+    with zoo_required():
+        import rl_zoo3.enjoy as zoo_enjoy
+
+        from sb3_offon.cli_args import use_tolerant_store_dict
+        from sb3_offon.zoo import ALGOS, register
     register()
+    # ``--env-kwargs key:word``: unquoted strings, as for training
+    use_tolerant_store_dict()
     # A copy for enjoy alone: training keeps the real classes
-    zoo_enjoy.ALGOS = {**zoo_enjoy.ALGOS, **{name: ReplayLoader(cls) for name, cls in ALGOS.items()}}  # type: ignore[assignment]
+    zoo_enjoy.ALGOS = {**zoo_enjoy.ALGOS, **{name: ReplayLoader(cls) for name, cls in ALGOS.items()}}  # type: ignore[assignment,misc]
     zoo_enjoy.enjoy()
 
 

@@ -15,6 +15,10 @@ into ``--out`` (default ``results/<set>``):
 - ``table.md``: per env and algorithm, final return, area under the curve and env steps to the solve threshold, each
   a mean over seeds with a 95% CI; the aggregates; the Section 4.4 measures.
 
+With ``--readme README.md``, the same tables also replace the block between ``<!-- results:<set>:start -->`` and
+``<!-- results:<set>:end -->`` in that file (the text outside the markers is left as it is; a file without the markers
+is an error), so that the README's tables are always the ones of ``table.md``.
+
 Definitions (per run; then mean over seeds with a 95% percentile stratified-bootstrap CI from rliable, seeded):
 
 - evaluation curve: the mean return of each evaluation, put on the env's common grid of evaluation steps (a run that
@@ -30,11 +34,12 @@ Definitions (per run; then mean over seeds with a 95% percentile stratified-boot
 
 Usage::
 
-    python scripts/plot.py --root results/raw --set paper --out results/paper
+    python scripts/plot.py --root results/raw --set paper --out results/paper --readme README.md
 """
 
 import argparse
 import json
+import os
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -63,14 +68,20 @@ SECTION_44 = (FALL_PENALTY, GOAL_BONUS)
 STOP_WINDOW, STOP_THRESHOLD = 100, 490.0
 
 
-def parse_args() -> argparse.Namespace:
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--root", type=Path, default=Path("results/raw"), help="results root (default: results/raw)")
     parser.add_argument("--set", default="paper", help="hyperparameter set, a folder of the root (default: paper)")
     parser.add_argument("--out", type=Path, default=None, help="output folder (default: results/<set>)")
     parser.add_argument("--last", type=int, default=3, help="evaluations averaged into the final return (default: 3)")
     parser.add_argument("--reps", type=int, default=2000, help="bootstrap resamples (default: 2000)")
-    args = parser.parse_args()
+    parser.add_argument(
+        "--readme",
+        type=Path,
+        default=None,
+        help="also write the tables into this file, between <!-- results:<set>:start --> and <!-- results:<set>:end -->",
+    )
+    args = parser.parse_args(argv)
     args.out = args.out or Path("results") / args.set
     return args
 
@@ -424,22 +435,14 @@ def interval_text(values: tuple[float, float, float]) -> str:
     return f"{values[0]:.2f} [{values[1]:.2f}, {values[2]:.2f}]"
 
 
-def write_table(args: argparse.Namespace, runs: dict, scores: dict, result: dict | None, written: list) -> None:
-    n_runs = sum(len(by_seed) for by_algo in runs.values() for by_seed in by_algo.values())
+def command_text(args: argparse.Namespace) -> str:
+    readme = f" --readme {args.readme}" if args.readme is not None else ""
+    return f"python scripts/plot.py --root {args.root} --set {args.set} --out {args.out}{readme}"
+
+
+def table_sections(args: argparse.Namespace, runs: dict, scores: dict, result: dict | None) -> list[tuple[str, list[str]]]:
+    """The tables, as (title, lines): ``table.md``'s sections, and the README's block."""
     lines = [
-        f"# Benchmark results: `{args.set}` hyperparameters",
-        "",
-        f"From {n_runs} finished runs under `{args.root / args.set}` (`python scripts/plot.py --root {args.root} "
-        f"--set {args.set} --out {args.out}`). Means over seeds with 95% stratified-bootstrap confidence intervals "
-        f"(rliable, {args.reps} resamples). Returns are of the deterministic policy, evaluated periodically during training.",
-        "",
-        f"- **Final return**: mean of the last {args.last} evaluations.",
-        "- **AUC**: area under the evaluation curve divided by its span in env steps (the mean return over training).",
-        "- **Steps to threshold**: first evaluation step whose mean return reaches the threshold; a run that never "
-        "reaches it counts as its budget (so the mean is a lower bound), and *solved* says how many reached it.",
-        "",
-        "## Per environment and algorithm",
-        "",
         "| Env | Algorithm | Seeds | Budget | Final return | AUC | Steps to threshold | Solved |",
         "|---|---|---:|---:|---|---|---|---:|",
     ]
@@ -455,11 +458,9 @@ def write_table(args: argparse.Namespace, runs: dict, scores: dict, result: dict
                 f"| {env_text} | {label(algo)} | {len(algo_runs)} | {budget:,} | {fmt(score['final'], args.reps)} "
                 f"| {fmt(score['auc'], args.reps)} | {steps} | {solved} |"
             )
+    sections = [("Per environment and algorithm", lines)]
     if result is not None:
-        lines += [
-            "",
-            "## Across environments (rliable)",
-            "",
+        lines = [
             f"Envs: {', '.join(result['envs'])}. Per env, scores min-max normalised over all runs of all variants; "
             "IQM over runs x envs (seeds present on every env); probability of improvement P(X > DQN) per env, "
             "averaged over envs.",
@@ -473,11 +474,9 @@ def write_table(args: argparse.Namespace, runs: dict, scores: dict, result: dict
                 f"| {label(algo)} | {result['runs'][algo]} | {interval_text(result['iqm_final'][algo])} "
                 f"| {interval_text(result['iqm_auc'][algo])} | {poi} |"
             )
+        sections.append(("Across environments (rliable)", lines))
     if FALL_PENALTY in runs:
-        lines += [
-            "",
-            f"## Section 4.4: {FALL_PENALTY}",
-            "",
+        lines = [
             f"Training stops once the mean length of the last {STOP_WINDOW} training episodes reaches {STOP_THRESHOLD:g}. "
             "A run that never stops counts with all its episodes and steps (lower bounds).",
             "",
@@ -490,11 +489,9 @@ def write_table(args: argparse.Namespace, runs: dict, scores: dict, result: dict
                 f"| {label(algo)} | {len(algo_runs)} | {fmt(episodes, args.reps, 0)} | {fmt(steps, args.reps, 0)} "
                 f"| {int(stopped.sum())}/{len(algo_runs)} |"
             )
+        sections.append((f"Section 4.4: {FALL_PENALTY}", lines))
     if GOAL_BONUS in runs:
-        lines += [
-            "",
-            f"## Section 4.4: {GOAL_BONUS}",
-            "",
+        lines = [
             "Training episodes that reached the goal (the monitor CSV's `goal_reached`), over the whole run.",
             "",
             "| Algorithm | Seeds | Goal reaches | Training episodes | First goal (env step) |",
@@ -508,16 +505,77 @@ def write_table(args: argparse.Namespace, runs: dict, scores: dict, result: dict
             lines.append(
                 f"| {label(algo)} | {len(algo_runs)} | {fmt(totals, args.reps)} | {fmt(episodes, args.reps)} | {first_text} |"
             )
+        sections.append((f"Section 4.4: {GOAL_BONUS}", lines))
+    return sections
+
+
+def write_table(args: argparse.Namespace, n_runs: int, sections: list[tuple[str, list[str]]], written: list) -> None:
+    lines = [
+        f"# Benchmark results: `{args.set}` hyperparameters",
+        "",
+        f"From {n_runs} finished runs under `{args.root / args.set}` (`{command_text(args)}`). Means over seeds with 95% "
+        f"stratified-bootstrap confidence intervals (rliable, {args.reps} resamples). Returns are of the deterministic "
+        "policy, evaluated periodically during training.",
+        "",
+        f"- **Final return**: mean of the last {args.last} evaluations.",
+        "- **AUC**: area under the evaluation curve divided by its span in env steps (the mean return over training).",
+        "- **Steps to threshold**: first evaluation step whose mean return reaches the threshold; a run that never "
+        "reaches it counts as its budget (so the mean is a lower bound), and *solved* says how many reached it.",
+    ]
+    for title, body in sections:
+        lines += ["", f"## {title}", "", *body]
     path = args.out / "table.md"
     path.write_text("\n".join(lines) + "\n")
     written.append(path)
 
 
+def readme_markers(hyperparams_set: str) -> tuple[str, str]:
+    return f"<!-- results:{hyperparams_set}:start -->", f"<!-- results:{hyperparams_set}:end -->"
+
+
+def readme_block(args: argparse.Namespace, n_runs: int, sections: list[tuple[str, list[str]]], readme: Path) -> str:
+    """The README's copy of the tables: ``table.md``'s sections under bold titles, not headings of the README's own."""
+    table = Path(os.path.relpath(args.out / "table.md", readme.resolve().parent)).as_posix()
+    lines = [
+        f"<!-- Written by `{command_text(args)}`: edit scripts/plot.py, not this block. -->",
+        f"From {n_runs} runs: means over seeds with 95% stratified-bootstrap CIs; definitions in [{table}]({table}).",
+    ]
+    for title, body in sections:
+        lines += ["", f"**{title}**", "", *body]
+    return "\n".join(lines)
+
+
+def check_readme(path: Path, hyperparams_set: str) -> str:
+    """The text of ``path``, which must hold the set's start and end markers once each, in that order."""
+    start, end = readme_markers(hyperparams_set)
+    if not path.is_file():
+        raise SystemExit(f"--readme {path}: no such file")
+    text = path.read_text()
+    for marker in (start, end):
+        if text.count(marker) != 1:
+            found = "not found" if marker not in text else f"found {text.count(marker)} times"
+            raise SystemExit(f"{path}: the marker {marker} is {found}; put {start} and {end}, once each, where the tables go")
+    if text.index(end) < text.index(start):
+        raise SystemExit(f"{path}: the marker {end} comes before {start}")
+    return text
+
+
+def replace_readme_block(path: Path, hyperparams_set: str, block: str) -> None:
+    """Put ``block`` between the set's two markers of ``path``; the text outside them is kept as it is."""
+    start, end = readme_markers(hyperparams_set)
+    head, rest = check_readme(path, hyperparams_set).split(start)
+    tail = rest.split(end)[1]
+    # A blank line before the end marker: a table ends there in every Markdown reader
+    path.write_text(f"{head}{start}\n{block}\n\n{end}{tail}")
+
+
 # ----------------------------------------------------------------------------------------------------------------------
 # Main
 # ----------------------------------------------------------------------------------------------------------------------
-def main() -> None:
-    args = parse_args()
+def main(argv: list[str] | None = None) -> None:
+    args = parse_args(argv)
+    if args.readme is not None:
+        check_readme(args.readme, args.set)  # before the work, not after it
     runs = load_runs(args.root / args.set)
     if not runs:
         raise SystemExit(f"No finished run under {args.root / args.set}")
@@ -537,7 +595,12 @@ def main() -> None:
     result = aggregates(runs, scores, args.reps)
     if result is not None:
         plot_aggregates(result, args.out, written)
-    write_table(args, runs, scores, result, written)
+    sections = table_sections(args, runs, scores, result)
+    n_runs = sum(len(by_seed) for by_algo in runs.values() for by_seed in by_algo.values())
+    write_table(args, n_runs, sections, written)
+    if args.readme is not None:
+        replace_readme_block(args.readme, args.set, readme_block(args, n_runs, sections, args.readme))
+        written.append(args.readme)
     print("Wrote:\n  " + "\n  ".join(str(path) for path in written))
 
 

@@ -456,6 +456,39 @@ def test_bad_input_names_the_parameter(name, value):
         OffOnDQN("MlpPolicy", "CartPole-v1", **{name: value})
 
 
+@pytest.mark.parametrize(
+    "name",
+    [
+        "mc_initial_prob",
+        "mc_final_prob",
+        "mc_fraction",
+        "qlearning_initial_prob",
+        "qlearning_final_prob",
+        "qlearning_fraction",
+    ],
+)
+@pytest.mark.parametrize("value", ["0.5", None, float("nan"), True, np.bool_(False), [0.5]])
+def test_bad_types_of_numbers_name_the_parameter(name, value):
+    with pytest.raises(ValueError, match=f"`{name}` must be a real number"):
+        OffOnDQN("MlpPolicy", "CartPole-v1", **{name: value})
+
+
+@pytest.mark.parametrize("name", ["mc_mixing", "sarsa_target", "mc_truncation", "loss"])
+@pytest.mark.parametrize("value", [None, 1, True, ["sample"], np.array(["huber", "mse"])])
+def test_bad_types_of_options_name_the_parameter(name, value):
+    with pytest.raises(ValueError, match=f"`{name}` must be one of"):
+        OffOnDQN("MlpPolicy", "CartPole-v1", **{name: value})
+
+
+def test_numpy_and_integer_probabilities_are_accepted():
+    # What YAML files and NumPy code hand over: 1 (an int), np.float32 values
+    model = OffOnDQN(
+        "MlpPolicy", "CartPole-v1", mc_initial_prob=1, mc_final_prob=np.float32(0.25), qlearning_fraction=np.float64(0.5)
+    )
+    assert model.mc_schedule(1.0) == 1.0
+    assert model.mc_schedule(0.0) == pytest.approx(0.25)
+
+
 # --- logging -----------------------------------------------------------------------------------------------------
 
 

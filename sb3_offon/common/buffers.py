@@ -153,7 +153,7 @@ class OffOnBufferMixin:
             if truncated.any():
                 tails[truncated] = self._state_values(next_obs, done_envs[truncated])
             for env, tail in zip(done_envs, tails, strict=True):
-                self._finish_episode(env, tail)
+                self._finish_episode(int(env), float(tail))
 
     def _state_values(self, observations: Any, env_indices: np.ndarray) -> np.ndarray:
         """Bootstrap values of the given envs' final observations (taken from a batch of all envs' observations)."""
@@ -185,7 +185,7 @@ class OffOnBufferMixin:
         last_slot = (self._n_adds - 1) % self.buffer_size
         tails = self._state_values(self._stored_next_observations(last_slot), running)
         for env, tail in zip(running, tails, strict=True):
-            self._finish_episode(env, tail)
+            self._finish_episode(int(env), float(tail))
 
     def _stored_next_observations(self, slot: int) -> Any:
         if self.optimize_memory_usage:
@@ -215,7 +215,7 @@ class OffOnBufferMixin:
         if env is not None:
             # Stored in raw reward units, like the rewards, and scaled like them (the per-reward clip aside)
             mc_returns /= reward_scale(env)
-        return sample_class(*samples, next_actions=self.to_torch(next_actions), mc_returns=self.to_torch(mc_returns))
+        return sample_class(**samples._asdict(), next_actions=self.to_torch(next_actions), mc_returns=self.to_torch(mc_returns))
 
     def to_torch(self, array: np.ndarray, copy: bool = True) -> th.Tensor:
         """

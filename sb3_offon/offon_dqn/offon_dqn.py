@@ -1,3 +1,5 @@
+import math
+import numbers
 import warnings
 from typing import Any, ClassVar, TypeVar
 
@@ -41,6 +43,18 @@ OFFON_PARAMETERS = (
     "mc_truncation",
     "loss",
 )
+
+
+def _real_number(name: str, value: Any) -> float:
+    """
+    ``value`` as a float, if it is a real number: not a string ("0.5"), None, NaN or a bool (``True`` would pass as 1).
+
+    :raises ValueError: naming the parameter, otherwise the comparisons that follow raise a ``TypeError`` (a string)
+        or pass silently (NaN, bools)
+    """
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real) or math.isnan(value):
+        raise ValueError(f"`{name}` must be a real number, got {value!r} ({type(value).__name__})")
+    return float(value)
 
 
 class OffOnDQN(DQN):
@@ -225,11 +239,11 @@ class OffOnDQN(DQN):
 
     def _check_offon_arguments(self) -> None:
         for name in ("mc_initial_prob", "mc_final_prob", "qlearning_initial_prob", "qlearning_final_prob"):
-            value = getattr(self, name)
+            value = _real_number(name, getattr(self, name))
             if not 0.0 <= value <= 1.0:
                 raise ValueError(f"`{name}` must be a probability in [0, 1], got {value!r}")
         for name in ("mc_fraction", "qlearning_fraction"):
-            value = getattr(self, name)
+            value = _real_number(name, getattr(self, name))
             if not 0.0 < value <= 1.0:
                 raise ValueError(f"`{name}` must be in (0, 1], got {value!r}")
         for name, options in (
@@ -239,7 +253,8 @@ class OffOnDQN(DQN):
             ("loss", tuple(LOSS_FUNCTIONS)),
         ):
             value = getattr(self, name)
-            if value not in options:
+            # isinstance first: an array or other object would make ``in`` ambiguous or raise something else
+            if not isinstance(value, str) or value not in options:
                 raise ValueError(f"`{name}` must be one of {options}, got {value!r}")
 
     def _setup_model(self) -> None:
