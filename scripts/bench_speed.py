@@ -18,6 +18,13 @@ The load average (``os.getloadavg()``) is sampled around every pair.
 Usage:
     python scripts/bench_speed.py --env CartPole-v1
     python scripts/bench_speed.py --env LunarLander-v3 --timesteps 20000 --repeats 3 --output results/speed/lunarlander.json
+    python scripts/bench_speed.py --env CartPole-v1 --device cuda --output results/speed/cartpole_cuda.json
+    python scripts/bench_speed.py --env AtariShaped --device cuda --timesteps 5000 --output results/speed/atari_cuda.json
+
+``--env AtariShaped`` is an Atari-shaped task made up on the spot (4 stacked 84x84 uint8 frames, CnnPolicy, the zoo's
+Atari DQN settings with a smaller buffer), so that a GPU can be measured on CNNs without Atari ROMs. On ``--device
+cuda`` every timed interval ends with ``torch.cuda.synchronize()``, so that the device's queued work is counted in the
+run that queued it.
 """
 
 import argparse
@@ -38,6 +45,7 @@ import stable_baselines3
 import torch as th
 from stable_baselines3 import DQN
 from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.envs import FakeImageEnv
 
 import sb3_offon
 from sb3_offon import OffOnDQN
@@ -72,7 +80,29 @@ ZOO_HYPERPARAMS = {
         policy_kwargs=dict(net_arch=[256, 256]),
     ),
 }
-ZOO_TIMESTEPS = {"CartPole-v1": 50_000, "LunarLander-v3": 100_000}
+# An Atari-shaped task without Atari: SB3's FakeImageEnv with 4 stacked 84x84 uint8 frames (channel first, as the
+# zoo's AtariWrapper and frame stack give them to CnnPolicy), random frames and rewards, nothing downloaded. The zoo's
+# Atari DQN settings, except a smaller buffer and an earlier start of learning, so that a short run trains at all.
+ATARI_SHAPED = "AtariShaped"
+ZOO_HYPERPARAMS[ATARI_SHAPED] = dict(
+    learning_rate=1e-4,
+    batch_size=32,
+    buffer_size=10_000,
+    learning_starts=1000,
+    target_update_interval=1000,
+    train_freq=4,
+    gradient_steps=1,
+    exploration_fraction=0.1,
+    exploration_final_eps=0.01,
+)
+ZOO_TIMESTEPS = {"CartPole-v1": 50_000, "LunarLander-v3": 100_000, ATARI_SHAPED: 10_000_000}
+POLICIES = {"CartPole-v1": "MlpPolicy", "LunarLander-v3": "MlpPolicy", ATARI_SHAPED: "CnnPolicy"}
+
+
+def make_env(env_id: str) -> gym.Env:
+    if env_id == ATARI_SHAPED:
+        return FakeImageEnv(action_dim=4, screen_height=84, screen_width=84, n_channels=4, discrete=True, channel_first=True)
+    return gym.make(env_id)
 
 
 def parse_args() -> argparse.Namespace:
@@ -90,6 +120,9 @@ def parse_args() -> argparse.Namespace:
     )
     parser.add_argument("--seed", type=int, default=0, help="seed of every run (the same for both algorithms)")
     parser.add_argument("--threads", type=int, default=1, help="torch.set_num_threads")
+    parser.add_argument(
+        "--device", choices=["cpu", "cuda"], default="cpu", help="where the networks train (the env steps on the CPU)"
+    )
     parser.add_argument(
         "--warmup-timesteps",
         type=int,
@@ -154,6 +187,8 @@ class TakeTurns(BaseCallback):
         self.held_since = time.perf_counter()
 
     def release(self, finished: bool = False) -> None:
+        if th.cuda.is_available():
+            th.cuda.synchronize()  # the device's queued work belongs to this run's turn
         self.held_seconds += time.perf_counter() - self.held_since
         self.rng_states = global_rng_states()
         self.baton.hand_over(self.name, finished)
@@ -165,15 +200,17 @@ class TakeTurns(BaseCallback):
         return True
 
 
-def build(algo_class: type[DQN], env_id: str, hyperparams: dict, seed: int) -> tuple[DQN, list[float]]:
+def build(algo_class: type[DQN], env_id: str, hyperparams: dict, seed: int, device: str = "cpu") -> tuple[DQN, list[float]]:
     """A model whose train() time is summed into the returned one-element list."""
-    model = algo_class("MlpPolicy", env_id, seed=seed, verbose=0, device="cpu", **hyperparams)
+    model = algo_class(POLICIES[env_id], make_env(env_id), seed=seed, verbose=0, device=device, **hyperparams)
     train_seconds = [0.0]
     untimed_train = model.train
 
     def timed_train(*args, **kwargs) -> None:
         start = time.perf_counter()
         untimed_train(*args, **kwargs)
+        if model.device.type == "cuda":
+            th.cuda.synchronize()  # count the gradient steps the device still had queued
         train_seconds[0] += time.perf_counter() - start
 
     model.train = timed_train  # type: ignore[method-assign]
@@ -181,14 +218,20 @@ def build(algo_class: type[DQN], env_id: str, hyperparams: dict, seed: int) -> t
 
 
 def run_pair(
-    order: tuple[type[DQN], type[DQN]], env_id: str, hyperparams: dict, timesteps: int, seed: int, every: int
+    order: tuple[type[DQN], type[DQN]],
+    env_id: str,
+    hyperparams: dict,
+    timesteps: int,
+    seed: int,
+    every: int,
+    device: str = "cpu",
 ) -> dict:
     """Build both models (untimed), then run their learn() calls taking turns; one result dict per algorithm."""
     names = tuple(algo.__name__ for algo in order)
     baton = Baton(*names)
     models, callbacks = {}, {}
     for name, algo in zip(names, order, strict=True):
-        models[name] = build(algo, env_id, hyperparams, seed)
+        models[name] = build(algo, env_id, hyperparams, seed, device)
         callbacks[name] = TakeTurns(baton, name, every, rng_states=global_rng_states())
     cpu_seconds = {}
 
@@ -255,7 +298,8 @@ def markdown_table(result: dict) -> str:
     lines = [
         f"{result['env']}, {result['timesteps']} env steps per run, {result['repeats']} pairs taking turns every "
         f"{result['switch_every']} env steps, "
-        f"seed {result['seed']}, {result['threads']} torch thread(s), load average "
+        f"seed {result['seed']}, {result['policy']} on {result['device']} ({result['device_name']}), "
+        f"{result['threads']} torch thread(s), load average "
         f"{result['loadavg_start'][0]:.2f} at start / {result['loadavg_end'][0]:.2f} at end ({result['cpu_count']} CPUs), "
         f"sb3_offon {result['git']}, SB3 {result['versions']['stable_baselines3']}, torch {result['versions']['torch']}",
         "",
@@ -303,7 +347,9 @@ if __name__ == "__main__":
     args = parse_args()
     th.set_num_threads(args.threads)
     hyperparams = ZOO_HYPERPARAMS[args.env]  # one dict, passed as it is to both algorithms
-    gym.make(args.env).close()  # fail early if the env (Box2D for LunarLander) is missing
+    make_env(args.env).close()  # fail early if the env (Box2D for LunarLander) is missing
+    if args.device == "cuda" and not th.cuda.is_available():
+        raise SystemExit("--device cuda: no CUDA device")
 
     result = {
         "env": args.env,
@@ -313,6 +359,9 @@ if __name__ == "__main__":
         "switch_every": args.switch_every,
         "seed": args.seed,
         "threads": args.threads,
+        "device": args.device,
+        "device_name": th.cuda.get_device_name() if args.device == "cuda" else platform.processor() or platform.machine(),
+        "policy": POLICIES[args.env],
         "hyperparams": hyperparams,
         "cpu_count": os.cpu_count(),
         "platform": platform.platform(),
@@ -331,18 +380,21 @@ if __name__ == "__main__":
         "loadavg_start": os.getloadavg(),
         "pairs": [],
     }
-    print(f"{args.env}: {args.repeats} pairs of {args.timesteps} env steps, seed {args.seed}, {args.threads} thread(s)")
+    print(
+        f"{args.env}: {args.repeats} pairs of {args.timesteps} env steps, seed {args.seed}, {args.threads} thread(s), "
+        f"device {args.device} ({result['device_name']})"
+    )
     print(f"hyperparams: {hyperparams}")
     print(f"load average at start: {result['loadavg_start']} ({result['cpu_count']} CPUs)")
 
     if args.warmup_timesteps > 0:
-        run_pair((DQN, OffOnDQN), args.env, hyperparams, args.warmup_timesteps, args.seed, args.switch_every)
+        run_pair((DQN, OffOnDQN), args.env, hyperparams, args.warmup_timesteps, args.seed, args.switch_every, args.device)
         print(f"warm-up done ({args.warmup_timesteps} steps of each, untimed)")
 
     for repeat in range(args.repeats):
         order = (DQN, OffOnDQN) if repeat % 2 == 0 else (OffOnDQN, DQN)
         pair = {"repeat": repeat, "order": f"{order[0].__name__} starts"}
-        pair.update(run_pair(order, args.env, hyperparams, args.timesteps, args.seed, args.switch_every))
+        pair.update(run_pair(order, args.env, hyperparams, args.timesteps, args.seed, args.switch_every, args.device))
         for run in (pair["DQN"], pair["OffOnDQN"]):
             print(
                 f"  pair {repeat} {run['algo']:>8}: {run['steps_per_second']:7.1f} steps/s "

@@ -78,9 +78,16 @@ def targets_at(model: OffOnDQN, data, mc: float, qlearning: float, seed: int = 0
     """The targets and their masks (NumPy) at these probabilities, drawn as train() draws them."""
     model.mc_prob, model.qlearning_prob = mc, qlearning
     uniforms = np.random.default_rng(seed).random((2, len(data.rewards), 1), dtype=np.float32)
-    with th.no_grad():
-        targets, use_mc, use_sarsa, _ = model._targets(data, uniforms[0] < mc, uniforms[1] >= qlearning)
+    targets, use_mc, use_sarsa, _ = choose_and_compute(model, data, uniforms[0] < mc, uniforms[1] >= qlearning)
     return targets, mask_tensor(use_mc), mask_tensor(use_sarsa)
+
+
+def choose_and_compute(model: OffOnDQN, data, mc_drawn: np.ndarray, sarsa_drawn: np.ndarray):
+    """The target choice from the draws (on the host, as train() makes it), then the targets."""
+    use_mc, use_sarsa = model._target_choice(data.mc_returns.numpy(), data.next_actions.numpy(), mc_drawn, sarsa_drawn)
+    with th.no_grad():
+        targets, bound_active = model._targets(data, use_mc, use_sarsa)
+    return targets, use_mc, use_sarsa, bound_active
 
 
 def mask_tensor(mask: np.ndarray | None) -> th.Tensor | None:
@@ -154,13 +161,11 @@ def test_max_mixing_uses_the_return_as_a_lower_bound(model):
     model.mc_prob, model.qlearning_prob = 1.0, 1.0
     try:
         all_drawn = np.ones((len(qlearning), 1), dtype=bool)
-        with th.no_grad():
-            targets, use_mc, use_sarsa, bound_active = model._targets(data, all_drawn, ~all_drawn)
+        targets, use_mc, use_sarsa, bound_active = choose_and_compute(model, data, all_drawn, ~all_drawn)
         # Half drawn for MC: the others keep their TD target (here Sarsa where a' is known), whatever G says
         half = np.arange(len(qlearning)).reshape(-1, 1) % 2 == 0
         model.qlearning_prob = 0.0
-        with th.no_grad():
-            mixed, _, use_sarsa_mixed, _ = model._targets(data, half, all_drawn)
+        mixed, _, use_sarsa_mixed, _ = choose_and_compute(model, data, half, all_drawn)
     finally:
         model.mc_mixing = "sample"
     known = ~th.isnan(data.mc_returns)
@@ -244,14 +249,23 @@ def test_schedules_decay_linearly_then_stay():
         {"n_steps": 3},
         {"n_envs": 1},
         {"optimize_memory_usage": True, "replay_buffer_kwargs": {"handle_timeout_termination": False}},
+        # Many gradient steps per call, on a buffer that fills and wraps around: one gather for all of a call's steps
+        {"n_envs": 1, "gradient_steps": 24, "buffer_size": 300},
+        {
+            "optimize_memory_usage": True,
+            "replay_buffer_kwargs": {"handle_timeout_termination": False},
+            "n_envs": 1,
+            "gradient_steps": 24,
+            "buffer_size": 300,
+        },
     ],
-    ids=["1-step", "3-step", "one-env", "optimize-memory"],
+    ids=["1-step", "3-step", "one-env", "optimize-memory", "one-env-many-steps", "optimize-memory-many-steps"],
 )
 def test_bit_identical_to_dqn_with_qlearning_only(extra):
     def train(algo, **kwargs):
-        settings = dict(extra)
+        settings = {**SMALL, "gradient_steps": 2, **extra}
         env = make_vec_env("CartPole-v1", n_envs=settings.pop("n_envs", 2), seed=5)
-        return algo("MlpPolicy", env, seed=5, gradient_steps=2, **SMALL, **settings, **kwargs).learn(800)
+        return algo("MlpPolicy", env, seed=5, **settings, **kwargs).learn(800)
 
     ours, theirs = train(OffOnDQN, **Q_ONLY), train(DQN)
     assert ours.num_timesteps == theirs.num_timesteps
@@ -525,13 +539,15 @@ def test_target_statistics_by_hand():
     writer = RecordingWriter()
     model.set_logger(Logger(folder=None, output_formats=[writer]))
     # Two gradient steps of two samples; G is known for one sample of each
-    q_taken = [th.tensor([[1.0], [2.0]]), th.tensor([[4.0], [0.5]])]
-    returns = [th.tensor([[0.0], [float("nan")]]), th.tensor([[float("nan")], [1.0]])]
-    model._record_target_statistics([1.0, 3.0], q_taken, returns, n_mc_targets=1, n_sarsa_targets=2)
+    q_taken = th.tensor([[1.0], [2.0], [4.0], [0.5]])
+    returns = th.tensor([[0.0], [float("nan")], [float("nan")], [1.0]])
+    losses = th.tensor([1.0, 3.0])
+    model._record_target_statistics(losses, q_taken, returns, n_mc_targets=1, n_sarsa_targets=2)
     model.logger.dump()
     assert "train/mc_bound_active_fraction" not in writer.records[-1], "only logged for mc_mixing='max'"
     model.mc_mixing = "max"
-    model._record_target_statistics([1.0, 3.0], q_taken, returns, 1, 2, n_bound_active=th.tensor(1))
+    bound_active = [th.tensor([[True], [False]]), th.tensor([[False], [False]])]
+    model._record_target_statistics(losses, q_taken, returns, 1, 2, bound_active=bound_active)
     model.logger.dump()
     assert writer.records[-1]["train/mc_bound_active_fraction"] == pytest.approx(0.25)
     model.mc_mixing = "sample"
@@ -541,7 +557,7 @@ def test_target_statistics_by_hand():
     assert record["train/sarsa_target_fraction"] == pytest.approx(0.5)
     assert record["train/q_mc_gap"] == pytest.approx(((1.0 - 0.0) + (0.5 - 1.0)) / 2)
     # No known return: no gap to report
-    model._record_target_statistics([1.0], q_taken[:1], [th.full((2, 1), float("nan"))], 0, 0)
+    model._record_target_statistics(losses[:1], q_taken[:2], th.full((2, 1), float("nan")), 0, 0)
     model.logger.dump()
     assert "train/q_mc_gap" not in writer.records[-1]
 

@@ -43,6 +43,19 @@ class OffOnDictReplayBufferSamples(NamedTuple):
     mc_returns: th.Tensor
 
 
+class OffOnMinibatches(NamedTuple):
+    """
+    A training call's minibatches, gathered at once: ``samples`` holds them one after the other (rows
+    ``[k * batch_size, (k + 1) * batch_size)`` are the k-th), on the buffer's device. ``next_actions`` and
+    ``mc_returns`` are the same columns as in ``samples``, as the NumPy arrays they were made from, so that the target
+    choice is decided on the host without reading anything back from the device.
+    """
+
+    samples: "OffOnReplayBufferSamples | OffOnDictReplayBufferSamples"
+    next_actions: np.ndarray
+    mc_returns: np.ndarray
+
+
 def reward_scale(env: VecNormalize | None) -> float:
     """The factor VecNormalize divides rewards by (1 without reward normalisation), before its clip."""
     if env is None or not env.norm_reward:
@@ -195,27 +208,85 @@ class OffOnBufferMixin:
         return self.next_observations[slot]
 
     def _get_samples(self, batch_inds: np.ndarray, env: VecNormalize | None = None) -> Any:
+        return self._gather(batch_inds, env).samples
+
+    def sample_minibatches(self, n_batches: int, batch_size: int, env: VecNormalize | None = None) -> OffOnMinibatches:
+        """
+        ``n_batches`` minibatches of ``batch_size`` transitions, the same as ``n_batches`` calls of ``sample()`` would
+        give (the global RNG is consumed in the same order, so it ends where SB3's per-step sampling leaves it), made
+        into tensors at once: one upload per column instead of one per column and minibatch.
+
+        :param n_batches: the number of minibatches (a training call's gradient steps)
+        :param batch_size: the number of transitions in each
+        :param env: VecNormalize env to normalise the observations and rewards with (as for ``sample()``)
+        :return: the minibatches one after the other, with host copies of the return and next-action columns
+        """
+        if self.n_envs == 1:
+            # With one env, SB3's sample() draws the slots and nothing else (the env-index draw over one value leaves
+            # the RNG alone): drawing all the slots first, then gathering once, gives the same samples
+            batch_inds = np.concatenate([self._draw_slots(batch_size) for _ in range(n_batches)])
+            return self._gather(batch_inds, env)
+        # With several envs, SB3 draws each minibatch's env indices inside its gather, between two minibatches' slot
+        # draws: gathering per minibatch keeps that order, and only the upload is batched
+        parts = [self._gather(self._draw_slots(batch_size), env, upload=False) for _ in range(n_batches)]
+        return self._upload(
+            _concatenate([part.samples for part in parts]),
+            np.concatenate([part.next_actions for part in parts]),
+            np.concatenate([part.mc_returns for part in parts]),
+        )
+
+    def _draw_slots(self, batch_size: int) -> np.ndarray:
+        """The slot indices that SB3's ``sample()`` draws (``ReplayBuffer.sample``: not the newest slot, whose next
+        observation is not stored yet, with ``optimize_memory_usage``; ``BaseBuffer.sample`` otherwise)."""
+        if self.optimize_memory_usage and self.full:
+            return (np.random.randint(1, self.buffer_size, size=batch_size) + self.pos) % self.buffer_size
+        upper_bound = self.buffer_size if self.full else self.pos
+        return np.random.randint(0, upper_bound, size=batch_size)
+
+    def _gather(self, batch_inds: np.ndarray, env: VecNormalize | None = None, upload: bool = True) -> OffOnMinibatches:
+        """
+        SB3's samples at ``batch_inds`` (its ``_get_samples``, which also draws the env indices), plus each sample's next
+        action and Monte-Carlo return.
+
+        :param upload: False: leave every column as a NumPy array (to be concatenated with others, then uploaded)
+        """
         # SB3 draws each sample's env index inside _get_samples and does not return it. With one env it is 0. With
         # several, replaying that one draw from the same global RNG state recovers the indices, so SB3's sampling code
         # is reused as it is. The replay consumes the RNG exactly as SB3's draw did, so the global RNG ends where plain
         # SB3 would leave it (which the bit-identity with DQN relies on). Saving and restoring the state costs about
         # 0.2 ms, hence the shortcut for one env.
-        if self.n_envs == 1:
-            samples = super()._get_samples(batch_inds, env)  # type: ignore[misc]
-            env_indices = np.zeros(len(batch_inds), dtype=np.int64)
-        else:
-            rng_state = np.random.get_state(legacy=False)
-            samples = super()._get_samples(batch_inds, env)  # type: ignore[misc]
-            np.random.set_state(rng_state)
-            env_indices = np.random.randint(0, high=self.n_envs, size=(len(batch_inds),))
-
-        sample_class = OffOnDictReplayBufferSamples if isinstance(samples.observations, dict) else OffOnReplayBufferSamples
+        if not upload:
+            self.to_torch = _keep_numpy  # type: ignore[method-assign,assignment]
+        try:
+            if self.n_envs == 1:
+                samples = super()._get_samples(batch_inds, env)  # type: ignore[misc]
+                env_indices = np.zeros(len(batch_inds), dtype=np.int64)
+            else:
+                rng_state = np.random.get_state(legacy=False)
+                samples = super()._get_samples(batch_inds, env)  # type: ignore[misc]
+                np.random.set_state(rng_state)
+                env_indices = np.random.randint(0, high=self.n_envs, size=(len(batch_inds),))
+        finally:
+            if not upload:
+                del self.to_torch  # back to the class's method
         next_actions = self._sarsa_next_actions(batch_inds, env_indices).reshape(-1, 1)
         mc_returns = self.mc_returns[batch_inds, env_indices].reshape(-1, 1)
         if env is not None:
             # Stored in raw reward units, like the rewards, and scaled like them (the per-reward clip aside)
             mc_returns /= reward_scale(env)
-        return sample_class(**samples._asdict(), next_actions=self.to_torch(next_actions), mc_returns=self.to_torch(mc_returns))
+        if not upload:
+            return OffOnMinibatches(samples, next_actions, mc_returns)
+        return self._upload(samples, next_actions, mc_returns)
+
+    def _upload(self, samples: Any, next_actions: np.ndarray, mc_returns: np.ndarray) -> OffOnMinibatches:
+        """Put the columns that are still NumPy arrays on the device, as Off-On samples."""
+        sample_class = OffOnDictReplayBufferSamples if isinstance(samples.observations, dict) else OffOnReplayBufferSamples
+        columns = {name: _to_device(value, self.to_torch) for name, value in samples._asdict().items()}
+        return OffOnMinibatches(
+            sample_class(**columns, next_actions=self.to_torch(next_actions), mc_returns=self.to_torch(mc_returns)),
+            next_actions,
+            mc_returns,
+        )
 
     def to_torch(self, array: np.ndarray, copy: bool = True) -> th.Tensor:
         """
@@ -347,3 +418,29 @@ class OffOnDictReplayBuffer(OffOnBufferMixin, DictReplayBuffer):
             buffer_size, observation_space, action_space, device, n_envs, optimize_memory_usage, handle_timeout_termination
         )
         self._init_offon(gamma)
+
+
+def _keep_numpy(array: np.ndarray, copy: bool = True) -> np.ndarray:
+    # Stands in for to_torch while a minibatch is gathered to be concatenated with others before one upload
+    return array
+
+
+def _to_device(value: Any, to_torch: Callable[[np.ndarray], th.Tensor]) -> Any:
+    """A column of samples on the device: arrays are uploaded, dicts of them too; tensors and None stay as they are."""
+    if isinstance(value, np.ndarray):
+        return to_torch(value)
+    if isinstance(value, dict):
+        return {key: _to_device(item, to_torch) for key, item in value.items()}
+    return value
+
+
+def _concatenate(parts: list[Any]) -> Any:
+    """Minibatches (NamedTuples of arrays, dicts of arrays or None) concatenated column by column."""
+    first = parts[0]
+    if isinstance(first, tuple):
+        return type(first)(*(_concatenate([part[i] for part in parts]) for i in range(len(first))))
+    if isinstance(first, dict):
+        return {key: _concatenate([part[key] for part in parts]) for key in first}
+    if first is None:
+        return None
+    return np.concatenate(parts)

@@ -30,6 +30,8 @@ MC_MIXING_OPTIONS = ("sample", "convex", "max")
 SARSA_TARGET_OPTIONS = ("sampled", "expected")
 MC_TRUNCATION_OPTIONS = ("bootstrap", "terminal")
 LOSS_FUNCTIONS = {"huber": F.smooth_l1_loss, "mse": F.mse_loss}
+# At most this many bytes of observations (and as much for next observations) are gathered and uploaded at once
+MAX_CHUNK_BYTES = 64 * 2**20
 # The constructor arguments OffOnDQN adds to DQN's
 OFFON_PARAMETERS = (
     "mc_initial_prob",
@@ -341,6 +343,16 @@ class OffOnDQN(DQN):
         return result
 
     def train(self, gradient_steps: int, batch_size: int = 100) -> None:
+        """
+        ``gradient_steps`` updates of the Q-network, each on a minibatch of ``batch_size`` transitions.
+
+        SB3's DQN samples, computes the targets and reads the loss back from the device at each step. Here the
+        minibatches are gathered and uploaded in chunks of several steps (sampled from the global RNG exactly as SB3
+        samples them), the target network's values of a chunk come from one forward pass (it does not change during a
+        training call: SB3 updates it between rollout steps), which target each sample gets is decided on the host,
+        where its return and next action already are, and the statistics stay on the device until one read at the end.
+        Every step's update is the one the per-step loop would make: same samples, same targets, same order.
+        """
         self.mc_prob = self.mc_schedule(self._current_progress_remaining)
         self.qlearning_prob = self.qlearning_schedule(self._current_progress_remaining)
         self.logger.record("train/mc_prob", self.mc_prob)
@@ -353,69 +365,111 @@ class OffOnDQN(DQN):
         self._update_learning_rate(self.policy.optimizer)
         loss_fn = LOSS_FUNCTIONS[self.loss]
         # All of this call's target draws at once: uniforms for the MC choice and for the Q-learning/Sarsa choice
-        uniforms = self.target_rng.random((2, gradient_steps, batch_size, 1), dtype=np.float32)
+        uniforms = self.target_rng.random((2, gradient_steps * batch_size, 1), dtype=np.float32)
         mc_drawn, sarsa_drawn = uniforms[0] < self.mc_prob, uniforms[1] >= self.qlearning_prob
-        losses, q_taken, mc_returns = [], [], []
-        n_mc_targets = n_sarsa_targets = 0
-        # Samples whose target the Monte-Carlo bound decided (mc_mixing="max"), summed on the device
-        n_bound_active = th.zeros((), dtype=th.long, device=self.device)
+        # Expected Sarsa's behaviour policy is the online network, which each step changes: its targets are per step
+        targets_per_step = self.sarsa_target == "expected" and self.qlearning_prob < 1.0
         # Listed once per call rather than walking the policy's modules at each step as SB3's DQN does (same clipping)
         parameters = list(self.policy.parameters())
-        for step in range(gradient_steps):
-            replay_data: OffOnReplayBufferSamples = self.replay_buffer.sample(batch_size, env=self._vec_normalize_env)  # type: ignore[assignment]
-            with th.no_grad():
-                target_q_values, use_mc, use_sarsa, bound_active = self._targets(
-                    replay_data, mc_drawn[step], sarsa_drawn[step]
-                )
-                if bound_active is not None:
-                    n_bound_active += bound_active.sum()
-
-            current_q_values = self.q_net(replay_data.observations)
-            current_q_values = th.gather(current_q_values, dim=1, index=replay_data.actions.long())
-            loss = loss_fn(current_q_values, target_q_values)
-
-            self.policy.optimizer.zero_grad()
-            loss.backward()
-            th.nn.utils.clip_grad_norm_(parameters, self.max_grad_norm)
-            self.policy.optimizer.step()
-
-            # Statistics: the loss is read at each step as SB3's DQN does; Q(s, a) and G once per call, in one copy each
-            losses.append(loss.item())
-            q_taken.append(current_q_values.detach())
-            mc_returns.append(replay_data.mc_returns)
+        losses, q_taken, mc_returns, bound_active = [], [], [], []
+        n_mc_targets = n_sarsa_targets = 0
+        steps_per_chunk = self._steps_per_chunk(batch_size)
+        for first_step in range(0, gradient_steps, steps_per_chunk):
+            n_steps = min(steps_per_chunk, gradient_steps - first_step)
+            chunk = slice(first_step * batch_size, (first_step + n_steps) * batch_size)
+            batches = self.replay_buffer.sample_minibatches(n_steps, batch_size, env=self._vec_normalize_env)
+            data = batches.samples
+            use_mc, use_sarsa = self._target_choice(
+                batches.mc_returns, batches.next_actions, mc_drawn[chunk], sarsa_drawn[chunk]
+            )
             n_mc_targets += 0 if use_mc is None else int(np.count_nonzero(use_mc))
             n_sarsa_targets += 0 if use_sarsa is None else int(np.count_nonzero(use_sarsa))
+            if not targets_per_step:
+                with th.no_grad():
+                    targets, bound = self._targets(data, use_mc, use_sarsa)
+                bound_active += [] if bound is None else [bound]
+
+            for step in range(n_steps):
+                rows = slice(step * batch_size, (step + 1) * batch_size)
+                if targets_per_step:
+                    with th.no_grad():
+                        step_targets, bound = self._targets(_rows(data, rows), _rows(use_mc, rows), _rows(use_sarsa, rows))
+                    bound_active += [] if bound is None else [bound]
+                else:
+                    step_targets = targets[rows]
+
+                current_q_values = self.q_net(_rows(data.observations, rows))
+                current_q_values = th.gather(current_q_values, dim=1, index=data.actions[rows].long())
+                loss = loss_fn(current_q_values, step_targets)
+
+                self.policy.optimizer.zero_grad()
+                loss.backward()
+                th.nn.utils.clip_grad_norm_(parameters, self.max_grad_norm)
+                self.policy.optimizer.step()
+
+                # Kept on the device: reading the loss back at each step, as SB3 does, would wait for the device
+                losses.append(loss.detach())
+                q_taken.append(current_q_values.detach())
+            mc_returns.append(data.mc_returns)
 
         self._n_updates += gradient_steps
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
-        self._record_target_statistics(losses, q_taken, mc_returns, n_mc_targets, n_sarsa_targets, n_bound_active)
+        self._record_target_statistics(
+            th.stack(losses), th.cat(q_taken), th.cat(mc_returns), n_mc_targets, n_sarsa_targets, bound_active
+        )
 
-    def _targets(
-        self, replay_data: OffOnReplayBufferSamples, mc_drawn: np.ndarray, sarsa_drawn: np.ndarray
-    ) -> tuple[th.Tensor, np.ndarray | None, np.ndarray | None, th.Tensor | None]:
+    def _steps_per_chunk(self, batch_size: int) -> int:
         """
-        The regression targets of one minibatch.
+        How many minibatches to gather, upload and run through the target network at once: all of a call's, unless
+        their observations and next observations, as float32 in the networks, would take more than
+        ``MAX_CHUNK_BYTES`` (1,000 gradient steps on Atari frames would be some 7 GB).
+        """
+        observation_spaces: list[spaces.Space] = (
+            list(self.observation_space.spaces.values())
+            if isinstance(self.observation_space, spaces.Dict)
+            else [self.observation_space]
+        )
+        sample_bytes = 2 * 4 * sum(math.prod(space.shape or (1,)) for space in observation_spaces)
+        return max(1, MAX_CHUNK_BYTES // (batch_size * max(sample_bytes, 1)))
 
-        Which target each sample gets is decided in NumPy, on CPU views of the sampled returns and next actions: on a
-        batch of 64, a NumPy operation costs a fraction of a torch one. The torch side then needs one gather (Sarsa)
-        and one ``where`` (Monte-Carlo) beyond SB3's own target computation.
+    def _target_choice(
+        self, mc_returns: np.ndarray, next_actions: np.ndarray, mc_drawn: np.ndarray, sarsa_drawn: np.ndarray
+    ) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """
+        Which target each sample gets, decided on the host from its return and next action (NumPy arrays as sampled).
 
-        :param replay_data: the minibatch
+        :param mc_returns: per sample, the Monte-Carlo return (NaN: unknown)
+        :param next_actions: per sample, the action taken at s' (-1: unknown)
         :param mc_drawn: per sample, whether the draw picked the Monte-Carlo target (used where G is known)
         :param sarsa_drawn: per sample, whether the draw picked Sarsa over Q-learning (used where a' is known)
-        :return: the targets, the masks of samples whose target is Monte-Carlo and Sarsa (None: not drawn at all), and
-            (``mc_mixing="max"``) the mask, on the device, of samples where the return was above the TD target
+        :return: the masks of samples whose target is Monte-Carlo (or, with ``mc_mixing`` ``"convex"``/``"max"``, whose
+            target the return enters) and Sarsa; None where that target is not drawn at all
         """
         use_mc = use_sarsa = None
-        bound_active = None
         if self.mc_prob > 0.0:
-            known_return = ~np.isnan(replay_data.mc_returns.numpy(force=True))
+            known_return = ~np.isnan(mc_returns)
             use_mc = known_return if self.mc_mixing == "convex" else known_return & mc_drawn
         if self.qlearning_prob < 1.0:
-            use_sarsa = self._sarsa_known(replay_data) & sarsa_drawn
+            known_action = np.ones(next_actions.shape, dtype=bool) if self.sarsa_target == "expected" else next_actions >= 0
+            use_sarsa = known_action & sarsa_drawn
             if use_mc is not None and self.mc_mixing == "sample":
                 use_sarsa &= ~use_mc  # a Monte-Carlo target replaces the TD target altogether
+        return use_mc, use_sarsa
 
+    def _targets(
+        self, replay_data: OffOnReplayBufferSamples, use_mc: np.ndarray | None, use_sarsa: np.ndarray | None
+    ) -> tuple[th.Tensor, th.Tensor | None]:
+        """
+        The regression targets of a batch of samples (one or several minibatches), from the target choice of
+        :meth:`_target_choice`. Nothing is read back from the device.
+
+        :param replay_data: the samples
+        :param use_mc: the samples whose target is (or, mixed, includes) their Monte-Carlo return; None: none
+        :param use_sarsa: the samples whose TD target is Sarsa's; None: none
+        :return: the targets and (``mc_mixing="max"``) the mask, on the device, of samples where the return was above
+            the TD target and so decided it
+        """
+        bound_active = None
         # For n-step replay, discount factor is gamma**n_steps (when no early termination)
         discounts = replay_data.discounts if replay_data.discounts is not None else self.gamma
         next_q_values_all = self.q_net_target(replay_data.next_observations)
@@ -436,17 +490,11 @@ class OffOnDQN(DQN):
                 bound_active = use_mc_tensor & (mc_targets > target_q_values)
                 mc_targets = th.maximum(mc_targets, target_q_values)
             target_q_values = th.where(use_mc_tensor, mc_targets, target_q_values)
-        return target_q_values, use_mc, use_sarsa, bound_active
+        return target_q_values, bound_active
 
     def _to_device(self, array: np.ndarray) -> th.Tensor:
         # from_numpy then to(): a few times cheaper than as_tensor(..., device=...) for a small array on the CPU
         return th.from_numpy(array).to(self.device)
-
-    def _sarsa_known(self, replay_data: OffOnReplayBufferSamples) -> np.ndarray:
-        """Where a Sarsa target exists: the next action is known (sampled Sarsa), everywhere (expected Sarsa)."""
-        if self.sarsa_target == "expected":
-            return np.ones(replay_data.next_actions.shape, dtype=bool)
-        return replay_data.next_actions.numpy(force=True) >= 0
 
     def _sarsa_next_values(
         self,
@@ -457,40 +505,52 @@ class OffOnDQN(DQN):
         use_sarsa: np.ndarray,
     ) -> th.Tensor:
         """The values of the next states: Sarsa's where ``use_sarsa``, max_a Q_target(s', a) elsewhere."""
+        use_sarsa_tensor = self._to_device(use_sarsa)
         if self.sarsa_target == "expected":
             # Expectation under the behaviour policy: epsilon-greedy on the online network
             behaviour_greedy = self.q_net(replay_data.next_observations).argmax(dim=1, keepdim=True)
             greedy_values = th.gather(next_q_values_all, dim=1, index=behaviour_greedy)
             expected = self.exploration_rate * next_q_values_all.mean(dim=1, keepdim=True)
             expected = expected + (1.0 - self.exploration_rate) * greedy_values
-            return th.where(self._to_device(use_sarsa), expected, max_next_q_values)
-        # One gather: at the recorded next action a' for Sarsa, at the target network's greedy action elsewhere (which
-        # reads back exactly the max)
-        greedy = greedy_actions.numpy(force=True).reshape(-1, 1)
-        bootstrap_actions = np.where(use_sarsa, replay_data.next_actions.numpy(force=True), greedy)
-        return th.gather(next_q_values_all, dim=1, index=self._to_device(bootstrap_actions))
+            return th.where(use_sarsa_tensor, expected, max_next_q_values)
+        # One gather, on the device: at the recorded next action a' for Sarsa, at the target network's greedy action
+        # elsewhere (which reads back exactly the max; a' is -1 there where unknown, and not used)
+        bootstrap_actions = th.where(use_sarsa_tensor, replay_data.next_actions, greedy_actions.reshape(-1, 1))
+        return th.gather(next_q_values_all, dim=1, index=bootstrap_actions)
 
     def _record_target_statistics(
         self,
-        losses: list[float],
-        q_taken: list[th.Tensor],
-        mc_returns: list[th.Tensor],
+        losses: th.Tensor,
+        q_taken: th.Tensor,
+        mc_returns: th.Tensor,
         n_mc_targets: int,
         n_sarsa_targets: int,
-        n_bound_active: th.Tensor | int = 0,
+        bound_active: list[th.Tensor] | None = None,
     ) -> None:
-        returns = th.cat(mc_returns).numpy(force=True)
-        self.logger.record("train/loss", np.mean(losses))
-        self.logger.record("train/mc_target_fraction", n_mc_targets / len(returns))
-        self.logger.record("train/sarsa_target_fraction", n_sarsa_targets / len(returns))
+        """
+        Log a training call's statistics, with one read from the device.
+
+        :param losses: the loss of each gradient step
+        :param q_taken: Q(s, a) of every sample, as the online network gave it at its step
+        :param mc_returns: every sample's return (NaN: unknown)
+        :param n_mc_targets: the number of samples whose target is (or includes) the return
+        :param n_sarsa_targets: the number of samples whose TD target is Sarsa's
+        :param bound_active: ``mc_mixing="max"``: masks of the samples whose target the return decided
+        """
+        # NaN where G is unknown: nansum leaves those samples out of the sum, and the count of known ones divides it
+        gaps = q_taken - mc_returns
+        n_bound_active = sum(mask.sum() for mask in bound_active) if bound_active else th.zeros((), device=losses.device)
+        loss, gap_sum, n_known, n_bound = th.stack(
+            [losses.mean(), th.nansum(gaps), (gaps == gaps).sum().to(losses.dtype), th.as_tensor(n_bound_active).to(losses)]
+        ).tolist()
+        n_samples = len(mc_returns)
+        self.logger.record("train/loss", loss)
+        self.logger.record("train/mc_target_fraction", n_mc_targets / n_samples)
+        self.logger.record("train/sarsa_target_fraction", n_sarsa_targets / n_samples)
         if self.mc_mixing == "max":
-            self.logger.record("train/mc_bound_active_fraction", int(n_bound_active) / len(returns))
-        # NaN where G is unknown: those samples drop out of the mean
-        gaps = th.cat(q_taken).numpy(force=True) - returns
-        known = gaps == gaps
-        n_known = np.count_nonzero(known)
+            self.logger.record("train/mc_bound_active_fraction", n_bound / n_samples)
         if n_known > 0:
-            self.logger.record("train/q_mc_gap", float(gaps[known].sum() / n_known))
+            self.logger.record("train/q_mc_gap", gap_sum / n_known)
 
     def learn(
         self: SelfOffOnDQN,
@@ -513,3 +573,14 @@ class OffOnDQN(DQN):
     def _excluded_save_params(self) -> list[str]:
         # The schedules are rebuilt from their parameters in _setup_model
         return [*super()._excluded_save_params(), "mc_schedule", "qlearning_schedule"]
+
+
+def _rows(value: Any, rows: slice) -> Any:
+    """The rows of a tensor, array, dict of them or samples NamedTuple (views, not copies); None stays None."""
+    if value is None:
+        return None
+    if isinstance(value, tuple):
+        return type(value)(*(_rows(item, rows) for item in value))
+    if isinstance(value, dict):
+        return {key: item[rows] for key, item in value.items()}
+    return value[rows]
