@@ -21,8 +21,8 @@ Usage:
     python scripts/bench_speed.py --env CartPole-v1 --device cuda --output results/speed/cartpole_cuda.json
     python scripts/bench_speed.py --env AtariShaped --device cuda --timesteps 5000 --output results/speed/atari_cuda.json
 
-``--env AtariShaped`` is an Atari-shaped task made up on the spot (4 stacked 84x84 uint8 frames, CnnPolicy, the zoo's
-Atari DQN settings with a smaller buffer), so that a GPU can be measured on CNNs without Atari ROMs. On ``--device
+``--env AtariShaped`` is an Atari-shaped task made up on the spot (4 stacked 84x84 uint8 frames, episodes of 200 steps
+that end by termination, CnnPolicy, the zoo's Atari DQN settings with a smaller buffer), so that a GPU can be measured on CNNs without Atari ROMs. On ``--device
 cuda`` every timed interval ends with ``torch.cuda.synchronize()``, so that the device's queued work is counted in the
 run that queued it.
 """
@@ -99,9 +99,27 @@ ZOO_TIMESTEPS = {"CartPole-v1": 50_000, "LunarLander-v3": 100_000, ATARI_SHAPED:
 POLICIES = {"CartPole-v1": "MlpPolicy", "LunarLander-v3": "MlpPolicy", ATARI_SHAPED: "CnnPolicy"}
 
 
+class AtariShapedEnv(FakeImageEnv):
+    """
+    Random 4x84x84 uint8 frames, 4 actions, zero rewards; episodes of ``ep_length`` steps that end by termination.
+
+    SB3's FakeImageEnv ends every 10 steps by truncation, where OffOnDQN runs the target network on the final frames to
+    bootstrap the return (one CNN forward pass per episode). Atari episodes under the zoo's AtariWrapper end by
+    termination (a lost life counts as one) after hundreds of steps: this env is shaped like that.
+    """
+
+    def __init__(self, ep_length: int = 200):
+        super().__init__(action_dim=4, screen_height=84, screen_width=84, n_channels=4, discrete=True, channel_first=True)
+        self.ep_length = ep_length
+
+    def step(self, action: np.ndarray | int) -> tuple:
+        observation, reward, _, truncated, info = super().step(action)
+        return observation, reward, truncated, False, info
+
+
 def make_env(env_id: str) -> gym.Env:
     if env_id == ATARI_SHAPED:
-        return FakeImageEnv(action_dim=4, screen_height=84, screen_width=84, n_channels=4, discrete=True, channel_first=True)
+        return AtariShapedEnv()
     return gym.make(env_id)
 
 
