@@ -22,9 +22,9 @@ Usage:
     python scripts/bench_speed.py --env AtariShaped --device cuda --timesteps 5000 --output results/speed/atari_cuda.json
 
 ``--env AtariShaped`` is an Atari-shaped task made up on the spot (4 stacked 84x84 uint8 frames, episodes of 200 steps
-that end by termination, CnnPolicy, the zoo's Atari DQN settings with a smaller buffer), so that a GPU can be measured on CNNs without Atari ROMs. On ``--device
-cuda`` every timed interval ends with ``torch.cuda.synchronize()``, so that the device's queued work is counted in the
-run that queued it.
+that end by termination, CnnPolicy, the zoo's Atari DQN settings with a smaller buffer), so that CNNs can be measured,
+on a GPU too, without Atari ROMs. On ``--device cuda`` every timed interval ends with ``torch.cuda.synchronize()``, so
+that the device's queued work is counted in the run that queued it.
 """
 
 import argparse
