@@ -38,6 +38,8 @@ Usage::
     python scripts/benchmark.py --set tuned
     # Section 4.4
     python scripts/benchmark.py --set paper --envs CartPoleFallPenalty-v1 MountainCarGoalBonus-v0
+    # a grid of its own on fresh seeds, in <root>/headtohead/{algo}/{env}_{seed}/ (issue 13's head-to-head)
+    python scripts/benchmark.py --set tuned --name headtohead --algos dqn dqn_nstep qrdqn --seeds 10-19
     # on a Ray cluster
     python scripts/benchmark.py --set paper --ray-address auto
 """
@@ -116,6 +118,11 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         "--hyperparams", nargs="+", default=[], help="extra overrides passed to the zoo, e.g. learning_starts:100"
     )
     parser.add_argument("--root", type=Path, default=Path("results/raw"), help="results root (default: results/raw)")
+    parser.add_argument(
+        "--name",
+        default=None,
+        help="folder of this grid under --root (default: the set's name); e.g. --set tuned --name headtohead --seeds 10-19",
+    )
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="parallel runs (default: all cores)")
     parser.add_argument("--ray", action="store_true", help="run the tasks on Ray (a local instance unless --ray-address)")
     parser.add_argument("--ray-address", default=None, help="join this Ray cluster ('auto', 'ray://host:10001', ...)")
@@ -166,6 +173,7 @@ def build_specs(args: argparse.Namespace) -> list[dict]:
                 specs.append(
                     {
                         "set": args.set,
+                        "grid": args.name or args.set,
                         "algo": algo,
                         "env": env,
                         "seed": seed,
@@ -181,7 +189,7 @@ def build_specs(args: argparse.Namespace) -> list[dict]:
 
 
 def run_dir(root: Path, spec: dict) -> Path:
-    return root / spec["set"] / spec["algo"] / f"{spec['env']}_{spec['seed']}"
+    return root / spec.get("grid", spec["set"]) / spec["algo"] / f"{spec['env']}_{spec['seed']}"
 
 
 def train_command(spec: dict, log_folder: str) -> list[str]:
@@ -432,7 +440,7 @@ def main(argv: list[str] | None = None) -> int:
     todo = run_order(todo)
     print(
         f"{len(specs)} runs ({len(args.algos)} algos x {len(args.envs)} envs x {len(args.seeds)} seeds, '{args.set}' set) "
-        f"in {args.root / args.set}: {len(specs) - len(todo)} finished, {len(todo)} to run"
+        f"in {args.root / (args.name or args.set)}: {len(specs) - len(todo)} finished, {len(todo)} to run"
         + (f" on Ray ({args.ray_address or f'local, {args.workers} CPUs'})" if args.ray else f" on {args.workers} workers")
     )
     if args.dry_run:

@@ -64,6 +64,17 @@ def test_dry_run_of_the_tuned_set(tmp_path: Path):
     assert seeds == sorted(seeds)
 
 
+def test_a_grid_named_apart_from_its_set(tmp_path: Path):
+    output = check(
+        benchmark(tmp_path, "--set", "tuned", "--name", "headtohead", "--envs", "CartPole-v1", "--seeds", "10-11", "--dry-run")
+    )
+    targets = [line.split(" -> ")[1] for line in output.splitlines() if " -> " in line]
+    assert sorted(targets) == sorted(
+        str(tmp_path / "headtohead" / algo / f"CartPole-v1_{seed}") for algo in ALGOS for seed in (10, 11)
+    )
+    assert all("-conf" not in line for line in output.splitlines() if "sb3_offon.train" in line), "the tuned settings"
+
+
 def load_script(name: str):
     spec = importlib.util.spec_from_file_location(f"{name}_script", SCRIPTS / f"{name}.py")
     module = importlib.util.module_from_spec(spec)
