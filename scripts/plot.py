@@ -57,8 +57,22 @@ from rliable import metrics
 warnings.filterwarnings("ignore", category=FutureWarning, module="arch")
 
 ALGOS = ["offon_dqn", "dqn_mc", "dqn_sarsa", "dqn"]
-LABELS = {"offon_dqn": "Off-On DQN", "dqn_mc": "DQN with MC", "dqn_sarsa": "DQN with Sarsa", "dqn": "DQN"}
-COLORS = {"offon_dqn": "tab:red", "dqn_mc": "tab:green", "dqn_sarsa": "tab:orange", "dqn": "tab:blue"}
+LABELS = {
+    "offon_dqn": "Off-On DQN",
+    "dqn_mc": "DQN with MC",
+    "dqn_sarsa": "DQN with Sarsa",
+    "dqn": "DQN",
+    "dqn_nstep": "n-step DQN",
+    "qrdqn": "QR-DQN",
+}
+COLORS = {
+    "offon_dqn": "tab:red",
+    "dqn_mc": "tab:green",
+    "dqn_sarsa": "tab:orange",
+    "dqn": "tab:blue",
+    "dqn_nstep": "tab:purple",
+    "qrdqn": "tab:brown",
+}
 BASELINE = "dqn"
 THRESHOLDS = {"CartPole-v1": 475.0, "MountainCar-v0": -110.0, "LunarLander-v3": 200.0, "Acrobot-v1": -100.0}
 PAPER_FIGURES = {"CartPole-v1": "Figure 8", "MountainCar-v0": "Figure 10", "LunarLander-v3": "Figure 12"}
