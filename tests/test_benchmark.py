@@ -75,6 +75,16 @@ def test_a_grid_named_apart_from_its_set(tmp_path: Path):
     assert all("-conf" not in line for line in output.splitlines() if "sb3_offon.train" in line), "the tuned settings"
 
 
+def test_mlp_runs_train_on_the_cpu_unless_told_otherwise(tmp_path: Path):
+    module = load_script("benchmark")
+    assert module.default_device("MlpPolicy") == "cpu"
+    assert module.default_device("CnnPolicy") == "auto"
+    output = check(benchmark(tmp_path, "--dry-run", "--seeds", "1"))
+    assert all("--device cpu" in line for line in output.splitlines() if "sb3_offon.train" in line)
+    output = check(benchmark(tmp_path, "--dry-run", "--seeds", "1", "--device", "cuda"))
+    assert all("--device cuda" in line for line in output.splitlines() if "sb3_offon.train" in line)
+
+
 def load_script(name: str):
     spec = importlib.util.spec_from_file_location(f"{name}_script", SCRIPTS / f"{name}.py")
     module = importlib.util.module_from_spec(spec)
