@@ -40,11 +40,13 @@ HYPERPARAMS_DIR = Path(__file__).resolve().parent / "hyperparams"
 # The names are the contract of the command line and of the log folders (logs/{algo}/...). ``dqn_nstep`` is SB3's own
 # DQN under a name of its own, so that its settings (the zoo's DQN entries plus ``n_steps``) and its logs are apart
 # from plain DQN's. The zoo already registers ``dqn`` and ``qrdqn`` (sb3-contrib); this package bundles their settings.
+# ``offon_choice`` is OffOnDQN with the target settings that issue 13's search chose, all of them in its YAML file.
 ALGOS: dict[str, type[BaseAlgorithm]] = {
     "offon_dqn": OffOnDQN,
     "dqn_mc": DQNMC,
     "dqn_sarsa": DQNSarsa,
     "dqn_nstep": DQN,
+    "offon_choice": OffOnDQN,
 }
 
 
@@ -190,6 +192,8 @@ SAMPLERS = {
     "offon_dqn": sample_offon_dqn_params,
     "dqn_mc": sample_dqn_mc_params,
     "dqn_sarsa": sample_dqn_sarsa_params,
+    # The search's choice fixes delta2 at 1 (no Sarsa), as DQNMC does: the same parameters are worth sampling
+    "offon_choice": sample_dqn_mc_params,
 }
 
 

@@ -64,6 +64,7 @@ LABELS = {
     "dqn": "DQN",
     "dqn_nstep": "n-step DQN",
     "qrdqn": "QR-DQN",
+    "offon_choice": "Off-On DQN (search's choice)",
 }
 COLORS = {
     "offon_dqn": "tab:red",
@@ -72,6 +73,7 @@ COLORS = {
     "dqn": "tab:blue",
     "dqn_nstep": "tab:purple",
     "qrdqn": "tab:brown",
+    "offon_choice": "tab:pink",
 }
 BASELINE = "dqn"
 THRESHOLDS = {"CartPole-v1": 475.0, "MountainCar-v0": -110.0, "LunarLander-v3": 200.0, "Acrobot-v1": -100.0}

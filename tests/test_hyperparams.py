@@ -25,8 +25,22 @@ register()
 PAPER_CLASSES = {"offon_dqn": OffOnDQN, "dqn_mc": DQNMC, "dqn_sarsa": DQNSarsa, "dqn": DQN}
 # The baselines of issue 13 have entries for the four benchmark tasks only
 BASELINE_CLASSES = {"dqn_nstep": DQN, "qrdqn": QRDQN}
-CLASSES = {**PAPER_CLASSES, **BASELINE_CLASSES}
+# The configuration the search of issue 13 chose: the four tasks and the search's stochastic one
+CHOICE_CLASSES = {"offon_choice": OffOnDQN}
+CLASSES = {**PAPER_CLASSES, **BASELINE_CLASSES, **CHOICE_CLASSES}
 BASELINE_ENVS = {"default", "atari", "CartPole-v1", "MountainCar-v0", "LunarLander-v3", "Acrobot-v1"}
+CHOICE_ENVS = BASELINE_ENVS | {"FrozenLake-v1"}
+# The search's winner, `mc_sample` (results/search/README.md): the paper's delta1 schedule, no Sarsa, SB3's loss
+CHOICE_TARGETS = dict(
+    mc_initial_prob=0.99,
+    mc_final_prob=0.01,
+    mc_fraction=1.0,
+    qlearning_initial_prob=1.0,
+    qlearning_final_prob=1.0,
+    mc_mixing="sample",
+    mc_truncation="bootstrap",
+    loss="huber",
+)
 REQUIRED_ENVS = {
     "CartPole-v1",
     "MountainCar-v0",
@@ -73,6 +87,7 @@ def test_every_algorithm_has_its_entries(folder: Path) -> None:
     if folder == HYPERPARAMS_DIR:
         for algo in BASELINE_CLASSES:
             assert set(load(folder / f"{algo}.yml")) == BASELINE_ENVS, algo
+        assert set(load(folder / "offon_choice.yml")) == CHOICE_ENVS
 
 
 def test_baselines_are_the_zoo_settings() -> None:
@@ -92,6 +107,14 @@ def test_variants_share_the_dqn_settings(algo: str) -> None:
         baseline = load(folder / "dqn.yml")
         for env_id, entry in load(folder / f"{algo}.yml").items():
             assert {key: value for key, value in entry.items() if key not in TARGET_KEYS} == baseline[env_id], env_id
+
+
+def test_choice_is_the_search_winner_on_the_dqn_settings() -> None:
+    """`offon_choice`: every entry is the `dqn` one plus the winner's target settings, and nothing else."""
+    dqn = load(HYPERPARAMS_DIR / "dqn.yml")
+    for env_id, entry in load(HYPERPARAMS_DIR / "offon_choice.yml").items():
+        assert {key: entry[key] for key in TARGET_KEYS & set(entry)} == CHOICE_TARGETS, env_id
+        assert {key: value for key, value in entry.items() if key not in TARGET_KEYS} == dqn[env_id], env_id
 
 
 def test_dqn_file_copies_the_zoo() -> None:
@@ -200,7 +223,9 @@ def test_sampler(algo: str) -> None:
         has_mc = {"mc_initial_prob", "mc_final_prob", "mc_fraction", "mc_mixing", "mc_truncation"} <= set(sampled)
         has_sarsa = {"qlearning_initial_prob", "qlearning_final_prob", "qlearning_fraction", "sarsa_target"} <= set(sampled)
         # A variant's fixed probability is not sampled
-        assert (has_mc, has_sarsa) == {"offon_dqn": (True, True), "dqn_mc": (True, False), "dqn_sarsa": (False, True)}[algo]
+        assert (has_mc, has_sarsa) == {"offon_dqn": (True, True), "dqn_mc": (True, False), "dqn_sarsa": (False, True), "offon_choice": (True, False)}[
+            algo
+        ]
         model = ALGOS[algo]("MlpPolicy", "CartPole-v1", device="cpu", **sampled)
         for key in TARGET_KEYS & set(sampled):
             assert getattr(model, key) == sampled[key]
