@@ -223,9 +223,9 @@ def test_sampler(algo: str) -> None:
         has_mc = {"mc_initial_prob", "mc_final_prob", "mc_fraction", "mc_mixing", "mc_truncation"} <= set(sampled)
         has_sarsa = {"qlearning_initial_prob", "qlearning_final_prob", "qlearning_fraction", "sarsa_target"} <= set(sampled)
         # A variant's fixed probability is not sampled
-        assert (has_mc, has_sarsa) == {"offon_dqn": (True, True), "dqn_mc": (True, False), "dqn_sarsa": (False, True), "offon_choice": (True, False)}[
-            algo
-        ]
+        expected = {"offon_dqn": (True, True), "dqn_mc": (True, False), "dqn_sarsa": (False, True)}
+        expected["offon_choice"] = expected["dqn_mc"]
+        assert (has_mc, has_sarsa) == expected[algo]
         model = ALGOS[algo]("MlpPolicy", "CartPole-v1", device="cpu", **sampled)
         for key in TARGET_KEYS & set(sampled):
             assert getattr(model, key) == sampled[key]
