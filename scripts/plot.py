@@ -30,7 +30,10 @@ Definitions (per run; then mean over seeds with a 95% percentile stratified-boot
   it counts as its budget (a lower bound), and the table says how many reached it;
 - aggregates (rliable): per env, final returns min-max normalised over all runs of all variants on that env; IQM over
   runs x envs; probability of improvement P(X > DQN) averaged over envs. The Section 4.4 envs are left out of the
-  aggregates when other envs are present (their rewards were altered on purpose).
+  aggregates when other envs are present (their rewards were altered on purpose);
+- against DQN, per env: the difference of mean final returns; whether the AUC's 95% CI lies above DQN's, below it, or
+  overlaps it; the IQM over seeds of the steps to threshold divided by DQN's. These two intervals are percentile
+  bootstraps that resample each algorithm's seeds apart (SciPy; the seeds are not paired).
 
 Usage::
 
@@ -52,6 +55,7 @@ import numpy as np
 import pandas as pd
 from rliable import library as rly
 from rliable import metrics
+from scipy import stats
 
 # arch (rliable's bootstrap) warns that ``random_state`` will change meaning; rliable passes it
 warnings.filterwarnings("ignore", category=FutureWarning, module="arch")
@@ -222,6 +226,30 @@ def run_scores(runs: list[Run], grid: np.ndarray, curves: np.ndarray, last: int,
             if len(reached):
                 steps[index], solved[index] = grid[reached[0]], True
     return {"final": final, "auc": auc, "steps": steps, "solved": solved}
+
+
+def two_sample_ci(x: np.ndarray, y: np.ndarray, statistic, reps: int) -> tuple[float, float, float]:
+    """
+    ``statistic(x, y, axis)`` and its 95% percentile bootstrap CI, the runs of ``x`` and ``y`` resampled apart (seeded);
+    NaN bounds when a side has a single run (nothing to resample).
+    """
+    point = float(statistic(x, y, axis=-1))
+    if min(len(x), len(y)) < 2:
+        return point, np.nan, np.nan
+    with warnings.catch_warnings():
+        # Identical values on both sides (every run solved at the same step) give a zero-width interval: right as it is
+        warnings.simplefilter("ignore", stats.DegenerateDataWarning)
+        result = stats.bootstrap((x, y), statistic, n_resamples=reps, method="percentile", rng=0, paired=False)
+    return point, float(result.confidence_interval.low), float(result.confidence_interval.high)
+
+
+def mean_difference(x: np.ndarray, y: np.ndarray, axis: int = -1) -> np.ndarray:
+    return np.mean(x, axis=axis) - np.mean(y, axis=axis)
+
+
+def iqm_ratio(x: np.ndarray, y: np.ndarray, axis: int = -1) -> np.ndarray:
+    """IQM of ``x`` over IQM of ``y``: rliable's IQM, the mean of the middle half (SciPy's 25% trimmed mean)."""
+    return stats.trim_mean(x, 0.25, axis=axis) / stats.trim_mean(y, 0.25, axis=axis)
 
 
 def fmt(values: np.ndarray, reps: int, digits: int = 1) -> str:
@@ -491,6 +519,9 @@ def table_sections(args: argparse.Namespace, runs: dict, scores: dict, result: d
                 f"| {interval_text(result['iqm_auc'][algo])} | {poi} |"
             )
         sections.append(("Across environments (rliable)", lines))
+    lines = against_baseline(args, runs, scores)
+    if lines:
+        sections.append((f"Against {label(BASELINE)}", lines))
     if FALL_PENALTY in runs:
         lines = [
             f"Training stops once the mean length of the last {STOP_WINDOW} training episodes reaches {STOP_THRESHOLD:g}. "
@@ -523,6 +554,43 @@ def table_sections(args: argparse.Namespace, runs: dict, scores: dict, result: d
             )
         sections.append((f"Section 4.4: {GOAL_BONUS}", lines))
     return sections
+
+
+def signed_text(values: tuple[float, float, float]) -> str:
+    point, low, high = values
+    return f"{point:+,.1f} [{low:+,.1f}, {high:+,.1f}]" if not np.isnan(low) else f"{point:+,.1f} (one run)"
+
+
+def against_baseline(args: argparse.Namespace, runs: dict, scores: dict) -> list[str]:
+    """Per env, every other algorithm against DQN: the measures of issue 13's targets (no lines without DQN)."""
+    lines = [
+        f"Per env: mean final return minus {label(BASELINE)}'s; where the AUC's 95% CI lies against {label(BASELINE)}'s "
+        f"(apart above, apart below, or overlapping); the IQM over seeds of the steps to threshold divided by "
+        f"{label(BASELINE)}'s (runs that never reach it count as their budget). Bracketed: 95% percentile bootstrap CIs, "
+        "seeds resampled apart.",
+        "",
+        f"| Env | Algorithm | Final return minus {label(BASELINE)}'s | AUC against {label(BASELINE)}'s | "
+        f"IQM steps to threshold ÷ {label(BASELINE)}'s |",
+        "|---|---|---|---|---|",
+    ]
+    for env, by_algo in runs.items():
+        if BASELINE not in by_algo or env in SECTION_44:
+            continue
+        baseline = scores[env][BASELINE]
+        _, baseline_low, baseline_high = (float(part[0]) for part in mean_ci(baseline["auc"], args.reps))
+        for algo in by_algo:
+            if algo == BASELINE:
+                continue
+            score = scores[env][algo]
+            difference = two_sample_ci(score["final"], baseline["final"], mean_difference, args.reps)
+            _, low, high = (float(part[0]) for part in mean_ci(score["auc"], args.reps))
+            auc = "above, apart" if low > baseline_high else "below, apart" if high < baseline_low else "overlapping"
+            ratio = "—"
+            if threshold(env) is not None:
+                point, ratio_low, ratio_high = two_sample_ci(score["steps"], baseline["steps"], iqm_ratio, args.reps)
+                ratio = f"{point:.2f} [{ratio_low:.2f}, {ratio_high:.2f}]".replace("[nan, nan]", "(one run)")
+            lines.append(f"| {env} | {label(algo)} | {signed_text(difference)} | {auc} | {ratio} |")
+    return lines if len(lines) > 4 else []
 
 
 def write_table(args: argparse.Namespace, n_runs: int, sections: list[tuple[str, list[str]]], written: list) -> None:

@@ -6,6 +6,7 @@ output is deleted, and ``plot.py`` draws every figure and table from the result 
 Section 4.4 tasks added, for their figures). Each training run costs ~12 s of CPU, mostly the interpreter's imports.
 """
 
+import argparse
 import importlib.metadata
 import importlib.util
 import json
@@ -261,6 +262,36 @@ def test_plot_readme_tables_are_the_results_tables(hyperparams_set: str):
     assert start in text and end in text
     block = text.split(start)[1].split(end)[0]
     assert table_rows(block) == table_rows((root / "results" / hyperparams_set / "table.md").read_text())
+
+
+def test_against_dqn_rows_from_hand_made_scores():
+    module = load_script("plot")
+    seeds = np.arange(8.0)
+
+    def scores(final, auc, steps):
+        return {"final": np.asarray(final, float), "auc": np.asarray(auc, float), "steps": np.asarray(steps, float)}
+
+    by_algo = {
+        "dqn": scores(100 + 100 * (seeds % 4), 10 + seeds, 1000 * (seeds + 1)),  # final mean 250; steps IQM 4500
+        "offon_choice": scores(400 + seeds - 3.5, 50 + seeds, 500 * (seeds + 1)),  # final mean 400; steps IQM 2250
+        "qrdqn": scores(250 + (seeds - 3.5), 9 + seeds, 1000 * (seeds + 1)),  # AUC 9-16 against 10-17: overlapping
+        "dqn_nstep": scores(250 - 10 * seeds, -20 - seeds, 2000 * (seeds + 1)),  # AUC far below
+    }
+    env = "CartPole-v1"
+    args = argparse.Namespace(reps=500)
+    rows = {row.split(" | ")[1]: row for row in module.against_baseline(args, {env: by_algo}, {env: by_algo})[4:]}
+    assert set(rows) == {"Off-On DQN (search's choice)", "QR-DQN", "n-step DQN"}
+    choice = rows["Off-On DQN (search's choice)"].split(" | ")
+    assert choice[2].startswith("+150.0 [") and choice[3] == "above, apart" and choice[4].startswith("0.50 [")
+    low, high = (float(value) for value in choice[4].split("[")[1].rstrip("] |").split(", "))
+    assert low <= 0.5 <= high and low < high
+    assert rows["QR-DQN"].split(" | ")[2].startswith("+0.0 [") and rows["QR-DQN"].split(" | ")[3] == "overlapping"
+    assert rows["n-step DQN"].split(" | ")[3] == "below, apart" and rows["n-step DQN"].split(" | ")[4].startswith("2.00 [")
+    # Without DQN there is nothing to compare with; a single run has no interval
+    assert module.against_baseline(args, {env: {"qrdqn": 0}}, {env: {"qrdqn": by_algo["qrdqn"]}}) == []
+    single = {algo: scores(value["final"][:1], value["auc"][:1], value["steps"][:1]) for algo, value in by_algo.items()}
+    rows = module.against_baseline(args, {env: single}, {env: single})[4:]
+    assert "+296.5 (one run)" in rows[0] and "0.50 (one run)" in rows[0]
 
 
 def test_bootstrap_intervals_are_the_same_at_every_redraw():
