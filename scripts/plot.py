@@ -475,8 +475,12 @@ def plot_aggregates(result: dict, out: Path, written: list) -> None:
 # ----------------------------------------------------------------------------------------------------------------------
 # Table
 # ----------------------------------------------------------------------------------------------------------------------
-def interval_text(values: tuple[float, float, float]) -> str:
-    return f"{values[0]:.2f} [{values[1]:.2f}, {values[2]:.2f}]"
+def interval_text(values: tuple[float, float, float], spec: str = ".2f") -> str:
+    """``point [low, high]`` in the format ``spec``; ``point (one run)`` where there was nothing to resample (NaN bounds)."""
+    point, low, high = values
+    if np.isnan(low):
+        return f"{point:{spec}} (one run)"
+    return f"{point:{spec}} [{low:{spec}}, {high:{spec}}]"
 
 
 def command_text(args: argparse.Namespace) -> str:
@@ -556,14 +560,9 @@ def table_sections(args: argparse.Namespace, runs: dict, scores: dict, result: d
     return sections
 
 
-def signed_text(values: tuple[float, float, float]) -> str:
-    point, low, high = values
-    return f"{point:+,.1f} [{low:+,.1f}, {high:+,.1f}]" if not np.isnan(low) else f"{point:+,.1f} (one run)"
-
-
 def against_baseline(args: argparse.Namespace, runs: dict, scores: dict) -> list[str]:
     """Per env, every other algorithm against DQN: the measures of issue 13's targets (no lines without DQN)."""
-    lines = [
+    header = [
         f"Per env: mean final return minus {label(BASELINE)}'s; where the AUC's 95% CI lies against {label(BASELINE)}'s "
         f"(apart above, apart below, or overlapping); the IQM over seeds of the steps to threshold divided by "
         f"{label(BASELINE)}'s (runs that never reach it count as their budget). Bracketed: 95% percentile bootstrap CIs, "
@@ -573,6 +572,7 @@ def against_baseline(args: argparse.Namespace, runs: dict, scores: dict) -> list
         f"IQM steps to threshold ÷ {label(BASELINE)}'s |",
         "|---|---|---|---|---|",
     ]
+    rows = []
     for env, by_algo in runs.items():
         if BASELINE not in by_algo or env in SECTION_44:
             continue
@@ -587,10 +587,9 @@ def against_baseline(args: argparse.Namespace, runs: dict, scores: dict) -> list
             auc = "above, apart" if low > baseline_high else "below, apart" if high < baseline_low else "overlapping"
             ratio = "—"
             if threshold(env) is not None:
-                point, ratio_low, ratio_high = two_sample_ci(score["steps"], baseline["steps"], iqm_ratio, args.reps)
-                ratio = f"{point:.2f} [{ratio_low:.2f}, {ratio_high:.2f}]".replace("[nan, nan]", "(one run)")
-            lines.append(f"| {env} | {label(algo)} | {signed_text(difference)} | {auc} | {ratio} |")
-    return lines if len(lines) > 4 else []
+                ratio = interval_text(two_sample_ci(score["steps"], baseline["steps"], iqm_ratio, args.reps))
+            rows.append(f"| {env} | {label(algo)} | {interval_text(difference, '+,.1f')} | {auc} | {ratio} |")
+    return header + rows if rows else []
 
 
 def write_table(args: argparse.Namespace, n_runs: int, sections: list[tuple[str, list[str]]], written: list) -> None:
