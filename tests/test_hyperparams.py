@@ -100,6 +100,19 @@ def test_baselines_are_the_zoo_settings() -> None:
     assert load(HYPERPARAMS_DIR / "qrdqn.yml") == {env_id: zoo[env_id] for env_id in BASELINE_ENVS}
 
 
+def test_nstep_entries_are_the_search_choice() -> None:
+    """Each benchmark task's n_steps is the one the search's summary chose (python scripts/search.py report)."""
+    summary = (Path(__file__).parents[1] / "results" / "search" / "summary.md").read_text()
+    chosen = {}
+    for row in summary.split("## n-step DQN")[1].splitlines():
+        cells = [cell.strip() for cell in row.strip("|").split("|")]
+        if cells[0] in BASELINE_ENVS:
+            chosen[cells[0]] = int(cells[-1])
+    entries = load(HYPERPARAMS_DIR / "dqn_nstep.yml")
+    assert set(chosen) == BASELINE_ENVS - {"default", "atari"}
+    assert {env_id: entries[env_id]["n_steps"] for env_id in chosen} == chosen
+
+
 @pytest.mark.parametrize("algo", ["offon_dqn", "dqn_mc", "dqn_sarsa"])
 def test_variants_share_the_dqn_settings(algo: str) -> None:
     """Apart from the target options, each entry is the `dqn` one: the comparison is like for like."""
