@@ -585,6 +585,8 @@ def against_baseline(args: argparse.Namespace, runs: dict, scores: dict) -> list
             difference = two_sample_ci(score["final"], baseline["final"], mean_difference, args.reps)
             _, low, high = (float(part[0]) for part in mean_ci(score["auc"], args.reps))
             auc = "above, apart" if low > baseline_high else "below, apart" if high < baseline_low else "overlapping"
+            if min(len(score["auc"]), len(baseline["auc"])) < 2:
+                auc = "(one run)"  # a single run's CI is a point: "apart" would claim what one seed cannot show
             ratio = "—"
             if threshold(env) is not None:
                 ratio = interval_text(two_sample_ci(score["steps"], baseline["steps"], iqm_ratio, args.reps))
