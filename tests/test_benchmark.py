@@ -253,7 +253,7 @@ def test_plot_readme_without_markers_is_an_error_naming_the_marker(tmp_path: Pat
     assert not out.exists() and readme.read_text() == "# Project\n"
 
 
-@pytest.mark.parametrize("hyperparams_set", ["paper", "tuned"])
+@pytest.mark.parametrize("hyperparams_set", ["paper", "tuned", "headtohead"])
 def test_plot_readme_tables_are_the_results_tables(hyperparams_set: str):
     # The project's README shows the tables of results/<set>/table.md (python scripts/plot.py ... --readme README.md)
     root = SCRIPTS.parent
