@@ -24,13 +24,15 @@ def zoo_required() -> Iterator[None]:
 
     Wrap only the imports of the zoo-dependent code: an error raised by the command itself is not a missing extra.
 
-    :raises SystemExit: when a module of :data:`ZOO_MODULES` cannot be imported (its message goes to stderr)
+    :raises SystemExit: when a package of :data:`ZOO_MODULES` cannot be imported (its message goes to stderr)
     """
     try:
         yield
     except ModuleNotFoundError as error:
         missing = error.name or ""
-        if missing.partition(".")[0] not in ZOO_MODULES:
+        # An absent package is reported by its top-level name even when a submodule was imported; a dotted name
+        # means the package is there and one of its files is not found: a broken install, not a missing extra
+        if missing not in ZOO_MODULES:
             raise
         # ``from None``: the message is the whole report, the chained traceback would only bury it
         raise SystemExit(
