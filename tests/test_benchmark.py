@@ -294,6 +294,45 @@ def test_against_dqn_rows_from_hand_made_scores():
     assert rows[0].split(" | ")[2:] == ["+296.5 (one run)", "(one run)", "0.50 (one run) |"]
 
 
+def test_headtohead_rule_from_hand_made_scores():
+    """Issue 13's step-6 rule: the search's bar on every task's final return, AUC apart above DQN's on three of four."""
+    module = load_script("headtohead_rule")
+    seeds = np.arange(10.0)
+    envs = ["CartPole-v1", "MountainCar-v0", "LunarLander-v3", "Acrobot-v1"]
+    # 2% of each task's range (CartPole 0-500, MountainCar -200 to -100, LunarLander -250 to 250, Acrobot -500 to -60)
+    margin = {"CartPole-v1": 10.0, "MountainCar-v0": 2.0, "LunarLander-v3": 10.0, "Acrobot-v1": 8.8}
+
+    def grid(final_below: dict[str, float], auc_gap: dict[str, float], n_seeds: int = 10) -> dict:
+        """DQN's final mean 0 and AUC 0-9 per task; the choice's final that far below, its AUC that far above."""
+        return {
+            env: {
+                "dqn": {"final": seeds[:n_seeds] - 4.5, "auc": seeds[:n_seeds]},
+                "offon_choice": {"final": seeds[:n_seeds] - 4.5 - final_below[env], "auc": seeds[:n_seeds] + auc_gap[env]},
+            }
+            for env in envs
+        }
+
+    apart, overlapping = 20.0, 1.0
+    three_apart = dict(zip(envs, [apart, apart, apart, overlapping], strict=True))
+    exactly_at_the_bar = dict(margin)
+    verdict, lines = module.judge(grid(exactly_at_the_bar, three_apart), reps=500)
+    assert verdict == "holds", lines
+    assert lines[-1].startswith("Final return at or above the bar on 4 of 4") and "apart on 3 " in lines[-1]
+    assert lines[3].endswith("not apart above") and lines[0].endswith("-> above, apart")
+
+    below = dict(exactly_at_the_bar, **{"Acrobot-v1": margin["Acrobot-v1"] + 0.1})
+    verdict, lines = module.judge(grid(below, three_apart), reps=500)
+    assert verdict == "does not hold" and "-> BELOW" in lines[3], lines
+    two_apart = dict(three_apart, **{"CartPole-v1": overlapping})
+    assert module.judge(grid(exactly_at_the_bar, two_apart), reps=500)[0] == "does not hold"
+    # Nine seeds, or a task without the choice's runs: no decision yet, whatever the numbers say
+    assert module.judge(grid(exactly_at_the_bar, three_apart, n_seeds=9), reps=500)[0] == "incomplete"
+    partial = grid(exactly_at_the_bar, three_apart)
+    del partial["LunarLander-v3"]["offon_choice"]
+    verdict, lines = module.judge(partial, reps=500)
+    assert verdict == "incomplete" and lines[2] == "LunarLander-v3: no runs of offon_choice yet"
+
+
 def test_bootstrap_intervals_are_the_same_at_every_redraw():
     module = load_script("plot")
     values = np.random.default_rng(0).normal(size=(10, 5))
