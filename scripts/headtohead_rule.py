@@ -55,14 +55,13 @@ def judge(scores: dict[str, dict[str, dict[str, np.ndarray]]], reps: int) -> tup
         bar = float(np.mean(dqn["final"])) - TOLERANCE * (high - low)
         final = float(np.mean(choice["final"]))
         final_ok += final >= bar
-        _, dqn_low, dqn_high = (float(part[0]) for part in plot.mean_ci(dqn["auc"], reps))
-        _, choice_low, choice_high = (float(part[0]) for part in plot.mean_ci(choice["auc"], reps))
-        apart = choice_low > dqn_high
+        dqn_auc, choice_auc = plot.mean_interval(dqn["auc"], reps), plot.mean_interval(choice["auc"], reps)
+        apart = plot.position(choice_auc, dqn_auc) == "above, apart"
         auc_apart += apart
         lines.append(
             f"{env} ({len(choice['final'])} vs {len(dqn['final'])} seeds): final {final:.1f} against the bar {bar:.1f} "
             f"(DQN {np.mean(dqn['final']):.1f}) -> {'ok' if final >= bar else 'BELOW'}; "
-            f"AUC [{choice_low:.1f}, {choice_high:.1f}] against DQN's [{dqn_low:.1f}, {dqn_high:.1f}] -> "
+            f"AUC [{choice_auc[0]:.1f}, {choice_auc[1]:.1f}] against DQN's [{dqn_auc[0]:.1f}, {dqn_auc[1]:.1f}] -> "
             f"{'above, apart' if apart else 'not apart above'}"
         )
     lines.append(

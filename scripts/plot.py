@@ -202,6 +202,19 @@ def mean_ci(values: np.ndarray, reps: int) -> tuple[np.ndarray, np.ndarray, np.n
     return point["x"], interval["x"][0], interval["x"][1]
 
 
+def mean_interval(values: np.ndarray, reps: int) -> tuple[float, float]:
+    """The 95% bootstrap CI (low, high) of the mean of one scalar per run, as ``mean_ci`` gives it."""
+    _, low, high = mean_ci(values, reps)
+    return float(low[0]), float(high[0])
+
+
+def position(interval: tuple[float, float], baseline: tuple[float, float]) -> str:
+    """Where an interval lies against the baseline's: "above, apart", "below, apart" or "overlapping"."""
+    if interval[0] > baseline[1]:
+        return "above, apart"
+    return "below, apart" if interval[1] < baseline[0] else "overlapping"
+
+
 def fast_probability_of_improvement(scores_x: np.ndarray, scores_y: np.ndarray) -> float:
     """``metrics.probability_of_improvement`` (Mann-Whitney U / (n_x n_y), averaged over tasks), vectorised."""
     greater = (scores_x[:, None, :] > scores_y[None, :, :]).mean(axis=(0, 1))
@@ -577,14 +590,13 @@ def against_baseline(args: argparse.Namespace, runs: dict, scores: dict) -> list
         if BASELINE not in by_algo or env in SECTION_44:
             continue
         baseline = scores[env][BASELINE]
-        _, baseline_low, baseline_high = (float(part[0]) for part in mean_ci(baseline["auc"], args.reps))
+        baseline_auc = mean_interval(baseline["auc"], args.reps)
         for algo in by_algo:
             if algo == BASELINE:
                 continue
             score = scores[env][algo]
             difference = two_sample_ci(score["final"], baseline["final"], mean_difference, args.reps)
-            _, low, high = (float(part[0]) for part in mean_ci(score["auc"], args.reps))
-            auc = "above, apart" if low > baseline_high else "below, apart" if high < baseline_low else "overlapping"
+            auc = position(mean_interval(score["auc"], args.reps), baseline_auc)
             if min(len(score["auc"]), len(baseline["auc"])) < 2:
                 auc = "(one run)"  # a single run's CI is a point: "apart" would claim what one seed cannot show
             ratio = "—"
