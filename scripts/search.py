@@ -12,6 +12,15 @@ The candidates, the tasks and the criterion are fixed here, before any run of th
   every task, no more than 2% of the task's score range below DQN's ("never below DQN", with room for the noise of
   5 seeds), the highest mean over the five tasks of the normalised AUC (fixed per-task ranges below).
 
+Round 2 (added on 2026-11-24, before any of its runs, after the head-to-head on seeds 10-19 showed n-step DQN ahead of
+round 1's choice and both below DQN's final return on Acrobot): the round-1 ``max_*`` candidates lost CartPole's final
+return, and their bound was not a lower bound there, since a time-limit cut's return was bootstrapped from the target
+network. Candidates: ``max_drop``, the bound wherever an observed return is known, truncated episodes' returns left
+unknown (``mc_truncation="drop"``); ``max_drop_nstep10``, the same on the 10-step TD targets of n-step DQN. Criterion:
+a candidate earns a test on fresh seeds if, on seeds 0-4, (a) its mean final return is within round 1's bar of DQN's
+on all five tasks, (b) within the same bar of ``nstep10``'s on the four benchmark tasks, and (c) its mean normalised
+AUC over the four benchmark tasks is above ``nstep10``'s. Round 1's winner stays as it was.
+
 Runs that the earlier grids already made with the same settings and seeds (the tuned set: DQN, Off-On DQN and DQN with
 MC on the four benchmark tasks) are read from there, not redone. New runs go to
 ``results/raw/search/<candidate>/tuned/<algo>/<env>_<seed>/`` through ``scripts/benchmark.py``'s own functions, so they
@@ -63,9 +72,13 @@ class Candidate:
     # Runs of the tuned grid made with exactly these settings (no overrides): read from there on these envs
     reuse_tuned: bool = False
     description: str = ""
+    # 1: the search as first stated; 2: the round added after the head-to-head (its own criterion, module docstring)
+    round: int = 1
 
 
 MAX = "mc_mixing:'max'"
+# Round 2: the bound from observed returns only, wherever the return is known
+OBSERVED_BOUND = [MAX, "mc_truncation:'drop'", "mc_initial_prob:1.0", "mc_final_prob:1.0"]
 CANDIDATES = [
     Candidate("dqn", "dqn", reuse_tuned=True, description="SB3's DQN, the zoo's settings (the reference)"),
     Candidate(
@@ -84,9 +97,25 @@ CANDIDATES = [
         Candidate(f"nstep{n}", "dqn_nstep", [f"n_steps:{n}"], envs=list(BENCHMARK_ENVS), description=f"SB3's DQN, n_steps={n}")
         for n in (3, 5, 10)
     ],
+    Candidate(
+        "max_drop",
+        "dqn_mc",
+        OBSERVED_BOUND,
+        round=2,
+        description="lower bound wherever an observed return is known (time-limit cuts' returns dropped), no Sarsa",
+    ),
+    Candidate(
+        "max_drop_nstep10",
+        "dqn_mc",
+        [*OBSERVED_BOUND, "n_steps:10"],
+        round=2,
+        description="the same on 10-step TD targets",
+    ),
 ]
 BY_NAME = {candidate.name: candidate for candidate in CANDIDATES}
-OFFON_CANDIDATES = [candidate.name for candidate in CANDIDATES if candidate.algo != "dqn_nstep"]
+OFFON_CANDIDATES = [candidate.name for candidate in CANDIDATES if candidate.algo != "dqn_nstep" and candidate.round == 1]
+ROUND2_CANDIDATES = [candidate.name for candidate in CANDIDATES if candidate.round == 2]
+ROUND2_REFERENCE = "nstep10"
 
 
 def candidate_root(candidate: Candidate, env: str, search_root: Path = SEARCH_ROOT) -> Path:
@@ -234,11 +263,53 @@ def report(args: argparse.Namespace) -> int:
         lines.append(f"**Winner** (highest mean normalised AUC among the eligible): {winners[-1][1] if winners else 'none'}")
     else:
         lines.append(f"**Winner: pending** ({len(ranking)} of {len(OFFON_CANDIDATES)} Off-On candidates complete)")
+    lines += round2_lines(scores, dqn_final)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
     return 0
+
+
+def round2_lines(scores: dict[str, dict[str, np.ndarray]], dqn_final: dict[str, float]) -> list[str]:
+    """The round-2 table and verdicts: each candidate against DQN's bar (five tasks) and nstep10's (the four)."""
+    reference = scores[ROUND2_REFERENCE]
+    reference_final = {env: reference[env][:, 0].mean() if len(reference[env]) else np.nan for env in BENCHMARK_ENVS}
+    reference_auc = [normalise(env, reference[env][:, 1].mean()) for env in BENCHMARK_ENVS if len(reference[env])]
+    lines = [
+        "",
+        "## Round 2: observed-return lower bounds, against n-step DQN",
+        "",
+        f"Reference: {ROUND2_REFERENCE}, mean normalised AUC over the four benchmark tasks "
+        + (f"{np.mean(reference_auc):.3f}." if len(reference_auc) == len(BENCHMARK_ENVS) else "pending."),
+        "",
+        "| Candidate | Settings | "
+        + " | ".join(f"{env} final / AUC (n)" for env in OFFON_ENVS)
+        + " | Mean normalised AUC (4 tasks) | Within the bar of DQN (5) and nstep10 (4) | Fresh-seed test |",
+        "|---|---|" + "---|" * len(OFFON_ENVS) + "---|---|---|",
+    ]
+    for name in ROUND2_CANDIDATES:
+        cells, normalised_auc, eligible, complete = [], [], True, True
+        for env in OFFON_ENVS:
+            values = scores[name][env]
+            complete &= len(values) == len(TUNING_SEEDS)
+            if not len(values):
+                cells.append("—")
+                continue
+            final, auc = values.mean(axis=0)
+            cells.append(f"{final:.3g} / {auc:.3g} ({len(values)})")
+            low, high = SCORE_RANGES[env]
+            bars = [dqn_final[env]] + ([reference_final[env]] if env in BENCHMARK_ENVS else [])
+            eligible &= all(final >= bar - TOLERANCE * (high - low) for bar in bars)
+            if env in BENCHMARK_ENVS:
+                normalised_auc.append(normalise(env, auc))
+        mean_auc = float(np.mean(normalised_auc)) if normalised_auc else np.nan
+        beats_reference = len(reference_auc) == len(BENCHMARK_ENVS) and mean_auc > np.mean(reference_auc)
+        within = ("yes" if eligible else "no") if complete else ("no" if not eligible else "pending")
+        verdict = ("yes" if eligible and beats_reference else "no") if complete else within
+        settings = BY_NAME[name].description
+        lines.append(f"| {name} | {settings} | " + " | ".join(cells) + f" | {mean_auc:.3f} | {within} | {verdict} |")
+    return lines
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -342,3 +342,43 @@ def test_bootstrap_intervals_are_the_same_at_every_redraw():
     for a, b in zip(first, second, strict=True):
         np.testing.assert_array_equal(a, b)
     assert np.all(first[1] < first[0]) and np.all(first[0] < first[2]), "a real interval around the mean"
+
+
+def test_search_round2_verdict_from_hand_made_scores():
+    """Round 2 of the search: within the bar of DQN (five tasks) and nstep10 (four), and a mean normalised AUC above."""
+    module = load_script("search")
+    five = np.ones(5)
+    tasks = module.OFFON_ENVS
+    span = {env: module.SCORE_RANGES[env][1] - module.SCORE_RANGES[env][0] for env in tasks}
+    # DQN and nstep10 both end at each range's midpoint; nstep10's AUC is a quarter into the range on every task
+    middle = {env: sum(module.SCORE_RANGES[env]) / 2 for env in tasks}
+    dqn_final = dict(middle)
+    quarter = {env: module.SCORE_RANGES[env][0] + span[env] / 4 for env in tasks}
+    reference = {env: np.column_stack([five * middle[env], five * quarter[env]]) for env in tasks}
+
+    def verdict(final_below: float, auc_quarter: float, n_seeds: int = 5, env_below: str = "Acrobot-v1") -> list[str]:
+        candidate = {
+            env: np.column_stack(
+                [
+                    np.ones(n_seeds) * (middle[env] - (final_below * span[env] if env == env_below else 0.0)),
+                    np.ones(n_seeds) * (module.SCORE_RANGES[env][0] + auc_quarter * span[env]),
+                ]
+            )
+            for env in tasks
+        }
+        scores = {name: candidate for name in module.ROUND2_CANDIDATES} | {module.ROUND2_REFERENCE: reference}
+        rows = [line for line in module.round2_lines(scores, dqn_final) if line.startswith("| max_drop")]
+        assert len(rows) == len(module.ROUND2_CANDIDATES)
+        return rows[0].rstrip(" |").split(" | ")[-3:]
+
+    assert verdict(0.0, 0.30) == ["0.300", "yes", "yes"]
+    # At the bar (2% of the range below both references) still within; past it, not
+    assert verdict(0.02, 0.30)[1:] == ["yes", "yes"]
+    assert verdict(0.021, 0.30)[1:] == ["no", "no"]
+    # Within the bars, but an AUC not above nstep10's (0.25 normalised)
+    assert verdict(0.0, 0.25)[1:] == ["yes", "no"]
+    # FrozenLake is held to DQN's bar alone, and its AUC is not in the four-task mean
+    assert verdict(0.021, 0.30, env_below="FrozenLake-v1")[1:] == ["no", "no"]
+    # Four seeds: not decided while within the bars, decided "no" once below one
+    assert verdict(0.0, 0.30, n_seeds=4)[1:] == ["pending", "pending"]
+    assert verdict(0.021, 0.30, n_seeds=4)[1:] == ["no", "no"]

@@ -73,6 +73,63 @@ def test_truncated_episode_bootstrap_or_terminal(bootstrap):
         np.testing.assert_allclose(buffer.mc_returns[:3, 0], [2.75, 3.5, 3.0])
 
 
+def test_dropped_truncation_leaves_returns_unknown_and_keeps_terminated_ones():
+    buffer = make_buffer(n_envs=2)
+    buffer.drop_truncated_returns = True
+    buffer.truncation_value_fn = lambda obs: pytest.fail("a dropped truncation must not be bootstrapped")
+    # env 0: episode A = [1, 1] truncated at step 1, then episode B = [2, 2] terminated at step 3
+    # env 1: one episode [10, 0, 0, 8] terminated at step 3
+    step(buffer, [1, 10], [0, 0])
+    step(buffer, [1, 0], [1, 1], dones=[True, False], truncated=[True, False])
+    assert np.isnan(buffer.mc_returns[:2, 0]).all(), "the truncated episode's returns stay unknown"
+    assert buffer.episode_lengths[0] == 0, "Omega is cleared all the same"
+    step(buffer, [2, 0], [2, 2])
+    step(buffer, [2, 8], [3, 3], dones=[True, True])
+    assert np.isnan(buffer.mc_returns[:2, 0]).all()
+    # Episode B alone, not chained onto A: G_3 = 2, G_2 = 2 + 0.5 * 2 = 3
+    np.testing.assert_allclose(buffer.mc_returns[2:4, 0], [3.0, 2.0])
+    # env 1: G_3 = 8, G_2 = 4, G_1 = 2, G_0 = 10 + 0.5 * 2 = 11
+    np.testing.assert_allclose(buffer.mc_returns[:4, 1], [11.0, 2.0, 4.0, 8.0])
+    # Next actions (Sarsa) are kept within the dropped episode and do not cross into the next one
+    assert buffer.next_actions[0, 0] == 1 and buffer.next_actions[1, 0] == -1
+
+
+def test_dropped_truncation_after_the_ring_wrapped():
+    buffer = make_buffer(buffer_size=4)
+    buffer.drop_truncated_returns = True
+    # A terminated episode of 3 steps, then one of 3 steps truncated: the second overwrites slots 3, 0, 1
+    for t in range(3):
+        step(buffer, [1.0], [0], dones=[t == 2])
+    for t in range(3):
+        step(buffer, [5.0], [0], dones=[t == 2], truncated=[t == 2])
+    # Slot 2 keeps G_2 = 1 of the first episode; slots 3, 0, 1 hold the dropped one, unknown (not the old returns)
+    np.testing.assert_allclose(buffer.mc_returns[2, 0], 1.0)
+    assert np.isnan(buffer.mc_returns[[3, 0, 1], 0]).all()
+
+
+def test_end_open_episodes_with_dropped_truncations_leaves_them_unknown():
+    buffer = make_buffer(n_envs=2)
+    buffer.drop_truncated_returns = True
+    buffer.truncation_value_fn = lambda obs: pytest.fail("a dropped truncation must not be bootstrapped")
+    step(buffer, [1, 1], [0, 0])
+    step(buffer, [1, 1], [0, 0], dones=[True, False])
+    buffer.end_open_episodes()
+    np.testing.assert_allclose(buffer.mc_returns[:2, 0], [1.5, 1.0])
+    assert np.isnan(buffer.mc_returns[:2, 1]).all()
+    # The next episode starts afresh: ended at once, its return is its own reward
+    step(buffer, [1, 4], [3, 3], dones=[False, True])
+    assert buffer.mc_returns[2, 1] == 4.0 and np.isnan(buffer.mc_returns[:2, 1]).all()
+
+
+def test_buffer_pickled_before_drop_existed_loads_without_dropping():
+    buffer = make_buffer()
+    state = buffer.__getstate__()
+    del state["drop_truncated_returns"]
+    restored = OffOnReplayBuffer.__new__(OffOnReplayBuffer)
+    restored.__setstate__(state)
+    assert restored.drop_truncated_returns is False
+
+
 def test_terminated_episode_never_bootstraps():
     buffer = make_buffer()
     buffer.truncation_value_fn = lambda obs: pytest.fail("a terminated episode must not be bootstrapped")

@@ -352,6 +352,36 @@ def test_terminal_truncation_mode_sets_no_value_function():
     assert OffOnDQN("MlpPolicy", "CartPole-v1", **SMALL).replay_buffer.truncation_value_fn is not None
 
 
+def test_drop_truncation_mode_sets_the_buffer_and_survives_a_buffer_reload(tmp_path):
+    model = OffOnDQN("MlpPolicy", "CartPole-v1", mc_truncation="drop", **SMALL)
+    assert model.replay_buffer.drop_truncated_returns is True
+    assert model.replay_buffer.truncation_value_fn is None
+    assert OffOnDQN("MlpPolicy", "CartPole-v1", **SMALL).replay_buffer.drop_truncated_returns is False
+    model.save_replay_buffer(tmp_path / "buffer.pkl")
+    other = OffOnDQN("MlpPolicy", "CartPole-v1", **SMALL)
+    other.load_replay_buffer(tmp_path / "buffer.pkl")
+    assert other.replay_buffer.drop_truncated_returns is False, "the loading model's mc_truncation decides"
+
+
+def test_drop_truncation_keeps_only_returns_of_terminated_episodes():
+    # CartPole cut at 20 steps: terminated episodes (the pole fell) get returns, truncated ones (20 steps) none
+    env = gym.make("CartPole-v1", max_episode_steps=20)
+    model = OffOnDQN("MlpPolicy", env, mc_truncation="drop", gamma=0.9, seed=1, **SMALL)
+    model.learn(400)
+    buffer = model.replay_buffer
+    ends = np.flatnonzero(buffer.dones[: buffer.pos, 0])
+    kinds = {bool(buffer.timeouts[end, 0]) for end in ends}
+    assert kinds == {True, False}, "the run must hold both kinds of episode end"
+    start = 0
+    for end in ends:
+        returns = buffer.mc_returns[start : end + 1, 0]
+        if buffer.timeouts[end, 0]:
+            assert np.isnan(returns).all()
+        else:
+            np.testing.assert_allclose(returns, discounted_returns(buffer.rewards[start : end + 1, 0], 0.9), rtol=1e-5)
+        start = end + 1
+
+
 # --- save / load -------------------------------------------------------------------------------------------------
 
 

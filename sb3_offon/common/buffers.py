@@ -93,7 +93,8 @@ class OffOnBufferMixin:
     Overwriting a slot resets both to unknown (NaN, -1).
 
     Time-limit truncation: the return after the last step is ``truncation_value_fn(final_obs)`` when that is set
-    (OffOnDQN sets it for ``mc_truncation="bootstrap"``), else 0 (``"terminal"``).
+    (OffOnDQN sets it for ``mc_truncation="bootstrap"``), else 0 (``"terminal"``). With ``drop_truncated_returns``
+    (``"drop"``), a truncated episode's returns stay unknown, so that every known return is an observed one.
 
     :param gamma: the discount factor of the Monte-Carlo returns (OffOnDQN passes its own)
     """
@@ -112,6 +113,7 @@ class OffOnBufferMixin:
     def _init_offon(self, gamma: float) -> None:
         self.gamma = gamma
         self.truncation_value_fn: TruncationValueFn | None = None
+        self.drop_truncated_returns = False
         self.mc_returns = np.full((self.buffer_size, self.n_envs), np.nan, dtype=np.float32)
         self.next_actions = np.full((self.buffer_size, self.n_envs), UNKNOWN_ACTION, dtype=np.int64)
         self._reset_episodes()
@@ -139,6 +141,11 @@ class OffOnBufferMixin:
         state["truncation_value_fn"] = None
         return state
 
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        # Buffers pickled before mc_truncation="drop" existed bootstrapped or cut their truncations: they keep doing so
+        state.setdefault("drop_truncated_returns", False)
+        self.__dict__.update(state)
+
     def add(
         self,
         obs: Any,
@@ -163,10 +170,10 @@ class OffOnBufferMixin:
             done_envs = np.flatnonzero(done)
             truncated = np.array([bool(infos[env].get("TimeLimit.truncated", False)) for env in done_envs], dtype=bool)
             tails = np.zeros(len(done_envs))
-            if truncated.any():
+            if truncated.any() and not self.drop_truncated_returns:
                 tails[truncated] = self._state_values(next_obs, done_envs[truncated])
-            for env, tail in zip(done_envs, tails, strict=True):
-                self._finish_episode(int(env), float(tail))
+            for env, tail, cut in zip(done_envs, tails, truncated, strict=True):
+                self._finish_episode(int(env), float(tail), returns_known=not (cut and self.drop_truncated_returns))
 
     def _state_values(self, observations: Any, env_indices: np.ndarray) -> np.ndarray:
         """Bootstrap values of the given envs' final observations (taken from a batch of all envs' observations)."""
@@ -178,11 +185,15 @@ class OffOnBufferMixin:
             selected = np.asarray(observations)[env_indices]
         return np.asarray(self.truncation_value_fn(selected), dtype=np.float64).reshape(len(env_indices))
 
-    def _finish_episode(self, env: int, tail_value: float) -> None:
-        """Write the returns of env's episode, which ended with the latest add(), into the slots it still holds."""
-        kept = min(self._n_adds - int(self.episode_starts[env]), self.buffer_size)
-        slots = np.arange(self._n_adds - kept, self._n_adds) % self.buffer_size
-        self.mc_returns[slots, env] = discounted_returns(self.rewards[slots, env], self.gamma, tail_value)
+    def _finish_episode(self, env: int, tail_value: float, returns_known: bool = True) -> None:
+        """
+        Close env's episode, which ended with the latest add(): write its returns into the slots it still holds, or,
+        where ``returns_known`` is False (a truncation under ``drop_truncated_returns``), leave them unknown (NaN).
+        """
+        if returns_known:
+            kept = min(self._n_adds - int(self.episode_starts[env]), self.buffer_size)
+            slots = np.arange(self._n_adds - kept, self._n_adds) % self.buffer_size
+            self.mc_returns[slots, env] = discounted_returns(self.rewards[slots, env], self.gamma, tail_value)
         self.episode_starts[env] = self._n_adds
 
     def end_open_episodes(self) -> None:
@@ -190,9 +201,13 @@ class OffOnBufferMixin:
         End every running episode as truncated at its last stored next observation.
 
         Called when the env is reset outside an episode end (a new ``learn()`` call), so that an episode that was cut
-        off gets its returns, bootstrapped as any time-limit truncation, and does not chain into the next one.
+        off gets its returns, bootstrapped as any time-limit truncation (or left unknown, as any truncation, with
+        ``drop_truncated_returns``), and does not chain into the next one.
         """
         running = np.flatnonzero(self.episode_starts < self._n_adds)
+        if self.drop_truncated_returns:
+            self.episode_starts[running] = self._n_adds
+            return
         if len(running) == 0:
             return
         last_slot = (self._n_adds - 1) % self.buffer_size

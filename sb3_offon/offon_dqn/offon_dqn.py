@@ -28,7 +28,7 @@ SelfOffOnDQN = TypeVar("SelfOffOnDQN", bound="OffOnDQN")
 
 MC_MIXING_OPTIONS = ("sample", "convex", "max")
 SARSA_TARGET_OPTIONS = ("sampled", "expected")
-MC_TRUNCATION_OPTIONS = ("bootstrap", "terminal")
+MC_TRUNCATION_OPTIONS = ("bootstrap", "terminal", "drop")
 LOSS_FUNCTIONS = {"huber": F.smooth_l1_loss, "mse": F.mse_loss}
 # At most this many bytes of observations (and as much for next observations) are gathered and uploaded at once
 MAX_CHUNK_BYTES = 64 * 2**20
@@ -78,7 +78,9 @@ class OffOnDQN(DQN):
     - The Monte-Carlo return is the discounted return G_t = r_t + gamma * G_{t+1}, computed once when the episode
       ends and stored next to the transitions in the replay buffer (the paper's episode buffer Omega).
     - An episode cut by a time limit is not terminal: by default its return is bootstrapped from the target network
-      at the final observation (``mc_truncation="bootstrap"``); ``"terminal"`` is what the paper's code base did.
+      at the final observation (``mc_truncation="bootstrap"``); ``"terminal"`` is what the paper's code base did;
+      ``"drop"`` leaves its returns unknown (its samples take TD targets), which keeps ``mc_mixing="max"`` a true
+      lower bound in a deterministic environment whatever the sign of the rewards.
     - Sarsa bootstraps from the action actually taken at s' (recorded in the buffer; ``sarsa_target="sampled"``), or
       from the expectation under the current epsilon-greedy policy (``"expected"``).
     - The paper uses a squared error; SB3's DQN uses the Huber loss, which is the default here (``loss="mse"`` for
@@ -128,7 +130,10 @@ class OffOnDQN(DQN):
     :param sarsa_target: ``"sampled"`` bootstraps from the recorded next action (Q-learning where it is unknown);
         ``"expected"`` from the expectation under the current epsilon-greedy policy (Expected Sarsa)
     :param mc_truncation: return after a time-limit truncation: ``"bootstrap"``, gamma * max_a Q_target(s_T, a)
-        computed with the target network when the episode ends; ``"terminal"``, 0
+        computed with the target network when the episode ends; ``"terminal"``, 0; ``"drop"``, none: the episode's
+        returns stay unknown and its samples take TD targets. A bootstrapped return contains a network estimate and a
+        "terminal" one leaves out the rewards after the cut (optimistic where they are negative), so with
+        ``mc_mixing="max"`` only ``"drop"`` bounds Q* from below with observed returns alone
     :param loss: ``"huber"`` (SB3's DQN) or ``"mse"`` (the paper)
     :param stats_window_size: Window size for the rollout logging, specifying the number of episodes to average
         the reported success rate, mean episode length, and mean reward over
@@ -294,6 +299,7 @@ class OffOnDQN(DQN):
         if isinstance(self.replay_buffer, OffOnBufferMixin):
             bootstraps = self.mc_truncation == "bootstrap"
             self.replay_buffer.truncation_value_fn = self._target_state_values if bootstraps else None
+            self.replay_buffer.drop_truncated_returns = self.mc_truncation == "drop"
         elif not getattr(self, "_warned_plain_buffer", False):
             self._warned_plain_buffer = True
             warnings.warn(
