@@ -202,6 +202,30 @@ def normalise(env: str, value: np.ndarray | float) -> np.ndarray | float:
     return (value - low) / (high - low)
 
 
+def candidate_row(
+    scores: dict[str, np.ndarray], references: dict[str, list[float]], auc_envs: list[str] = OFFON_ENVS
+) -> tuple[list[str], float, bool, bool]:
+    """
+    A candidate's cells (final / AUC (seeds) per task of ``OFFON_ENVS``), its mean normalised AUC over ``auc_envs``,
+    whether its mean final return is within the bar (``TOLERANCE`` of the range) of every reference final return of
+    each finished task, and whether every task has all the tuning seeds.
+    """
+    cells, normalised_auc, eligible, complete = [], [], True, True
+    for env in OFFON_ENVS:
+        values = scores[env]
+        complete &= len(values) == len(TUNING_SEEDS)
+        if not len(values):
+            cells.append("—")
+            continue
+        final, auc = values.mean(axis=0)
+        cells.append(f"{final:.3g} / {auc:.3g} ({len(values)})")
+        low, high = SCORE_RANGES[env]
+        eligible &= all(bool(final >= reference - TOLERANCE * (high - low)) for reference in references[env])
+        if env in auc_envs:
+            normalised_auc.append(normalise(env, auc))
+    return cells, float(np.mean(normalised_auc)) if normalised_auc else np.nan, eligible, complete
+
+
 def report(args: argparse.Namespace) -> int:
     scores = {name: {env: collect(BY_NAME[name], env) for env in BY_NAME[name].envs} for name in BY_NAME}
     lines = [
@@ -223,20 +247,7 @@ def report(args: argparse.Namespace) -> int:
     dqn_final = {env: scores["dqn"][env][:, 0].mean() if len(scores["dqn"][env]) else np.nan for env in OFFON_ENVS}
     ranking = []
     for name in OFFON_CANDIDATES:
-        cells, normalised_auc, eligible, complete = [], [], True, True
-        for env in OFFON_ENVS:
-            values = scores[name][env]
-            complete &= len(values) == len(TUNING_SEEDS)
-            if not len(values):
-                cells.append("—")
-                complete = False
-                continue
-            final, auc = values.mean(axis=0)
-            cells.append(f"{final:.3g} / {auc:.3g} ({len(values)})")
-            normalised_auc.append(normalise(env, auc))
-            low, high = SCORE_RANGES[env]
-            eligible &= bool(final >= dqn_final[env] - TOLERANCE * (high - low))
-        mean_auc = float(np.mean(normalised_auc)) if normalised_auc else np.nan
+        cells, mean_auc, eligible, complete = candidate_row(scores[name], {env: [dqn_final[env]] for env in OFFON_ENVS})
         settings = BY_NAME[name].description
         verdict = ("yes" if eligible else "no") if complete else ("no" if not eligible else "pending")
         lines.append(f"| {name} | {settings} | " + " | ".join(cells) + f" | {mean_auc:.3f} | {verdict} |")
@@ -288,22 +299,9 @@ def round2_lines(scores: dict[str, dict[str, np.ndarray]], dqn_final: dict[str, 
         + " | Mean normalised AUC (4 tasks) | Within the bar of DQN (5) and nstep10 (4) | Fresh-seed test |",
         "|---|---|" + "---|" * len(OFFON_ENVS) + "---|---|---|",
     ]
+    references = {env: [dqn_final[env]] + ([reference_final[env]] if env in BENCHMARK_ENVS else []) for env in OFFON_ENVS}
     for name in ROUND2_CANDIDATES:
-        cells, normalised_auc, eligible, complete = [], [], True, True
-        for env in OFFON_ENVS:
-            values = scores[name][env]
-            complete &= len(values) == len(TUNING_SEEDS)
-            if not len(values):
-                cells.append("—")
-                continue
-            final, auc = values.mean(axis=0)
-            cells.append(f"{final:.3g} / {auc:.3g} ({len(values)})")
-            low, high = SCORE_RANGES[env]
-            bars = [dqn_final[env]] + ([reference_final[env]] if env in BENCHMARK_ENVS else [])
-            eligible &= all(final >= bar - TOLERANCE * (high - low) for bar in bars)
-            if env in BENCHMARK_ENVS:
-                normalised_auc.append(normalise(env, auc))
-        mean_auc = float(np.mean(normalised_auc)) if normalised_auc else np.nan
+        cells, mean_auc, eligible, complete = candidate_row(scores[name], references, auc_envs=BENCHMARK_ENVS)
         beats_reference = len(reference_auc) == len(BENCHMARK_ENVS) and mean_auc > np.mean(reference_auc)
         within = ("yes" if eligible else "no") if complete else ("no" if not eligible else "pending")
         verdict = ("yes" if eligible and beats_reference else "no") if complete else within
