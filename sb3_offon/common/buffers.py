@@ -169,11 +169,23 @@ class OffOnBufferMixin:
         if np.count_nonzero(done):
             done_envs = np.flatnonzero(done)
             truncated = np.array([bool(infos[env].get("TimeLimit.truncated", False)) for env in done_envs], dtype=bool)
-            tails = np.zeros(len(done_envs))
-            if truncated.any() and not self.drop_truncated_returns:
-                tails[truncated] = self._state_values(next_obs, done_envs[truncated])
-            for env, tail, cut in zip(done_envs, tails, truncated, strict=True):
-                self._finish_episode(int(env), float(tail), returns_known=not (cut and self.drop_truncated_returns))
+            for env in done_envs[~truncated]:
+                self._finish_episode(int(env), 0.0)
+            if truncated.any():
+                self._end_truncated(done_envs[truncated], next_obs)
+
+    def _end_truncated(self, env_indices: np.ndarray, final_observations: Any) -> None:
+        """
+        Close the given envs' episodes, cut (by a time limit or a reset) at their ``final_observations`` (a batch of
+        all envs' observations): their returns are bootstrapped from there, or left unknown with
+        ``drop_truncated_returns``.
+        """
+        if self.drop_truncated_returns:
+            self.episode_starts[env_indices] = self._n_adds
+            return
+        tails = self._state_values(final_observations, env_indices)
+        for env, tail in zip(env_indices, tails, strict=True):
+            self._finish_episode(int(env), float(tail))
 
     def _state_values(self, observations: Any, env_indices: np.ndarray) -> np.ndarray:
         """Bootstrap values of the given envs' final observations (taken from a batch of all envs' observations)."""
@@ -185,15 +197,11 @@ class OffOnBufferMixin:
             selected = np.asarray(observations)[env_indices]
         return np.asarray(self.truncation_value_fn(selected), dtype=np.float64).reshape(len(env_indices))
 
-    def _finish_episode(self, env: int, tail_value: float, returns_known: bool = True) -> None:
-        """
-        Close env's episode, which ended with the latest add(): write its returns into the slots it still holds, or,
-        where ``returns_known`` is False (a truncation under ``drop_truncated_returns``), leave them unknown (NaN).
-        """
-        if returns_known:
-            kept = min(self._n_adds - int(self.episode_starts[env]), self.buffer_size)
-            slots = np.arange(self._n_adds - kept, self._n_adds) % self.buffer_size
-            self.mc_returns[slots, env] = discounted_returns(self.rewards[slots, env], self.gamma, tail_value)
+    def _finish_episode(self, env: int, tail_value: float) -> None:
+        """Write the returns of env's episode, which ended with the latest add(), into the slots it still holds."""
+        kept = min(self._n_adds - int(self.episode_starts[env]), self.buffer_size)
+        slots = np.arange(self._n_adds - kept, self._n_adds) % self.buffer_size
+        self.mc_returns[slots, env] = discounted_returns(self.rewards[slots, env], self.gamma, tail_value)
         self.episode_starts[env] = self._n_adds
 
     def end_open_episodes(self) -> None:
@@ -205,15 +213,8 @@ class OffOnBufferMixin:
         ``drop_truncated_returns``), and does not chain into the next one.
         """
         running = np.flatnonzero(self.episode_starts < self._n_adds)
-        if self.drop_truncated_returns:
-            self.episode_starts[running] = self._n_adds
-            return
-        if len(running) == 0:
-            return
-        last_slot = (self._n_adds - 1) % self.buffer_size
-        tails = self._state_values(self._stored_next_observations(last_slot), running)
-        for env, tail in zip(running, tails, strict=True):
-            self._finish_episode(int(env), float(tail))
+        if len(running) > 0:
+            self._end_truncated(running, self._stored_next_observations((self._n_adds - 1) % self.buffer_size))
 
     def _stored_next_observations(self, slot: int) -> Any:
         if self.optimize_memory_usage:
