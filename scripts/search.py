@@ -226,6 +226,16 @@ def candidate_row(
     return cells, float(np.mean(normalised_auc)) if normalised_auc else np.nan, eligible, complete
 
 
+def mean_finals(scores: dict[str, np.ndarray], envs: list[str]) -> dict[str, float]:
+    """Per task, the mean final return over the finished seeds (NaN where none finished)."""
+    return {env: scores[env][:, 0].mean() if len(scores[env]) else np.nan for env in envs}
+
+
+def bar_verdict(eligible: bool, complete: bool) -> str:
+    """Within the bars: "yes"/"no" once every seed finished; "no" as soon as a task is below, else "pending"."""
+    return ("yes" if eligible else "no") if complete else ("no" if not eligible else "pending")
+
+
 def report(args: argparse.Namespace) -> int:
     scores = {name: {env: collect(BY_NAME[name], env) for env in BY_NAME[name].envs} for name in BY_NAME}
     lines = [
@@ -244,12 +254,12 @@ def report(args: argparse.Namespace) -> int:
         + " | Mean normalised AUC | Never below DQN |",
         "|---|---|" + "---|" * len(OFFON_ENVS) + "---|---|",
     ]
-    dqn_final = {env: scores["dqn"][env][:, 0].mean() if len(scores["dqn"][env]) else np.nan for env in OFFON_ENVS}
+    dqn_final = mean_finals(scores["dqn"], OFFON_ENVS)
     ranking = []
     for name in OFFON_CANDIDATES:
         cells, mean_auc, eligible, complete = candidate_row(scores[name], {env: [dqn_final[env]] for env in OFFON_ENVS})
         settings = BY_NAME[name].description
-        verdict = ("yes" if eligible else "no") if complete else ("no" if not eligible else "pending")
+        verdict = bar_verdict(eligible, complete)
         lines.append(f"| {name} | {settings} | " + " | ".join(cells) + f" | {mean_auc:.3f} | {verdict} |")
         if complete:
             ranking.append((eligible, mean_auc, name))
@@ -285,7 +295,7 @@ def report(args: argparse.Namespace) -> int:
 def round2_lines(scores: dict[str, dict[str, np.ndarray]], dqn_final: dict[str, float]) -> list[str]:
     """The round-2 table and verdicts: each candidate against DQN's bar (five tasks) and nstep10's (the four)."""
     reference = scores[ROUND2_REFERENCE]
-    reference_final = {env: reference[env][:, 0].mean() if len(reference[env]) else np.nan for env in BENCHMARK_ENVS}
+    reference_final = mean_finals(reference, BENCHMARK_ENVS)
     reference_auc = [normalise(env, reference[env][:, 1].mean()) for env in BENCHMARK_ENVS if len(reference[env])]
     lines = [
         "",
@@ -303,7 +313,7 @@ def round2_lines(scores: dict[str, dict[str, np.ndarray]], dqn_final: dict[str, 
     for name in ROUND2_CANDIDATES:
         cells, mean_auc, eligible, complete = candidate_row(scores[name], references, auc_envs=BENCHMARK_ENVS)
         beats_reference = len(reference_auc) == len(BENCHMARK_ENVS) and mean_auc > np.mean(reference_auc)
-        within = ("yes" if eligible else "no") if complete else ("no" if not eligible else "pending")
+        within = bar_verdict(eligible, complete)
         verdict = ("yes" if eligible and beats_reference else "no") if complete else within
         settings = BY_NAME[name].description
         lines.append(f"| {name} | {settings} | " + " | ".join(cells) + f" | {mean_auc:.3f} | {within} | {verdict} |")
