@@ -427,12 +427,29 @@ def plot_goal_reaches(by_algo: dict[str, list[Run]], reps: int, out: Path, writt
 # ----------------------------------------------------------------------------------------------------------------------
 # Aggregates across envs (rliable)
 # ----------------------------------------------------------------------------------------------------------------------
+def incomplete_cells(by_algo: dict[str, list[Run]], algos: list[str]) -> str:
+    """What one env still lacks against its most complete variant ("" when every variant has the same seeds)."""
+    seeds = {algo: {run.seed for run in by_algo.get(algo, [])} for algo in algos}
+    every = set.union(*seeds.values())
+    missing = [
+        f"{label(algo)} {len(seeds[algo])} of {len(every)} seeds" if seeds[algo] else f"no runs of {label(algo)}"
+        for algo in algos
+        if seeds[algo] != every
+    ]
+    return ", ".join(missing)
+
+
 def aggregates(runs: dict[str, dict[str, list[Run]]], scores: dict, reps: int) -> dict | None:
     """IQM of min-max normalised final returns and AUC, and P(improvement over DQN), over the envs all variants ran."""
     algos = sorted({algo for by_algo in runs.values() for algo in by_algo}, key=algo_order)
-    envs = [env for env in runs if all(algo in runs[env] for algo in algos)]
+    envs = list(runs)
     if any(env not in SECTION_44 for env in envs):
         envs = [env for env in envs if env not in SECTION_44]
+    # An env where a variant has no runs, or fewer seeds than another (runs still to come), waits until it is complete:
+    # taken in, it would shrink that variant's aggregate to the seeds it has there, or leave the variant out
+    left_out = {env: incomplete_cells(runs[env], algos) for env in envs}
+    left_out = {env: cells for env, cells in left_out.items() if cells}
+    envs = [env for env in envs if env not in left_out]
     if not envs:
         return None
     # Per algo: (runs, tasks) on the seeds it has on every env
@@ -448,7 +465,12 @@ def aggregates(runs: dict[str, dict[str, list[Run]]], scores: dict, reps: int) -
                 span = highs[env] - lows[env]
                 columns.append([(by_seed[seed] - lows[env]) / span if span > 0 else 0.5 for seed in seeds])
             matrices[measure][algo] = np.array(columns).T
-    result: dict = {"envs": envs, "algos": algos, "runs": {algo: len(matrices["final"][algo]) for algo in algos}}
+    result: dict = {
+        "envs": envs,
+        "left_out": left_out,
+        "algos": algos,
+        "runs": {algo: len(matrices["final"][algo]) for algo in algos},
+    }
     for measure, matrix in matrices.items():
         point, interval = interval_estimates(matrix, lambda s: np.array([metrics.aggregate_iqm(s)]), reps)
         result[f"iqm_{measure}"] = {algo: (point[algo][0], *interval[algo][:, 0]) for algo in algos}
@@ -488,6 +510,16 @@ def plot_aggregates(result: dict, out: Path, written: list) -> None:
 # ----------------------------------------------------------------------------------------------------------------------
 # Table
 # ----------------------------------------------------------------------------------------------------------------------
+def left_out_text(left_out: dict[str, str]) -> str:
+    if not left_out:
+        return ""
+    return (
+        " (left out until every variant has the same seeds there: "
+        + "; ".join(f"{env}, {cells}" for env, cells in left_out.items())
+        + ")"
+    )
+
+
 def interval_text(values: tuple[float, float, float], spec: str = ".2f") -> str:
     """``point [low, high]`` in the format ``spec``; ``point (one run)`` where there was nothing to resample (NaN bounds)."""
     point, low, high = values
@@ -522,9 +554,9 @@ def table_sections(args: argparse.Namespace, runs: dict, scores: dict, result: d
     sections = [("Per environment and algorithm", lines)]
     if result is not None:
         lines = [
-            f"Envs: {', '.join(result['envs'])}. Per env, scores min-max normalised over all runs of all variants; "
-            "IQM over runs x envs (seeds present on every env); probability of improvement P(X > DQN) per env, "
-            "averaged over envs.",
+            f"Envs: {', '.join(result['envs'])}{left_out_text(result['left_out'])}. Per env, scores min-max normalised "
+            "over all runs of all variants; IQM over runs x envs (seeds present on every env); probability of improvement "
+            "P(X > DQN) per env, averaged over envs.",
             "",
             f"| Algorithm | Runs | IQM normalised final return | IQM normalised AUC | P(improvement over {label(BASELINE)}) |",
             "|---|---:|---|---|---|",

@@ -333,6 +333,42 @@ def test_headtohead_rule_from_hand_made_scores():
     assert verdict == "incomplete" and lines[2] == "LunarLander-v3: no runs of offon_choice yet"
 
 
+def test_aggregate_waits_for_an_env_until_every_variant_has_its_seeds():
+    """An env with a variant's runs still to come stays out of the IQM, and the table says why."""
+    module = load_script("plot")
+
+    def cell(algo: str, env: str, finals: list[float], seeds: list[int]) -> tuple[list, dict]:
+        runs = [
+            module.Run(algo, env, seed, 100, np.array([100]), np.array([final]), None)
+            for seed, final in zip(seeds, finals, strict=True)
+        ]
+        return runs, {"final": np.array(finals), "auc": np.array(finals)}
+
+    def grid(qrdqn_seeds_on_b: list[int]) -> tuple[dict, dict]:
+        cells = {
+            ("A", "dqn"): cell("dqn", "A", [0.0, 1.0, 2.0], [0, 1, 2]),
+            ("A", "qrdqn"): cell("qrdqn", "A", [3.0, 4.0, 5.0], [0, 1, 2]),
+            ("B", "dqn"): cell("dqn", "B", [0.0, 0.0, 0.0], [0, 1, 2]),
+        }
+        if qrdqn_seeds_on_b:
+            cells["B", "qrdqn"] = cell("qrdqn", "B", [10.0] * len(qrdqn_seeds_on_b), qrdqn_seeds_on_b)
+        runs, scores = {}, {}
+        for (env, algo), (algo_runs, algo_scores) in cells.items():
+            runs.setdefault(env, {})[algo] = algo_runs
+            scores.setdefault(env, {})[algo] = algo_scores
+        return runs, scores
+
+    for qrdqn_seeds_on_b, why in [([], "no runs of QR-DQN"), ([0, 2], "QR-DQN 2 of 3 seeds")]:
+        result = module.aggregates(*grid(qrdqn_seeds_on_b), reps=200)
+        assert result["envs"] == ["A"] and result["left_out"] == {"B": why}
+        # Every variant keeps all three seeds of env A, and QR-DQN's runs there are all above DQN's
+        assert result["runs"] == {"dqn": 3, "qrdqn": 3} and result["poi"]["qrdqn"][0] == 1.0
+        text = module.left_out_text(result["left_out"])
+        assert text == f" (left out until every variant has the same seeds there: B, {why})"
+    complete = module.aggregates(*grid([0, 1, 2]), reps=200)
+    assert complete["envs"] == ["A", "B"] and complete["left_out"] == {} and complete["runs"] == {"dqn": 3, "qrdqn": 3}
+
+
 def test_bootstrap_intervals_are_the_same_at_every_redraw():
     module = load_script("plot")
     values = np.random.default_rng(0).normal(size=(10, 5))
