@@ -130,6 +130,13 @@ def test_buffer_pickled_before_drop_existed_loads_without_dropping():
     assert restored.drop_truncated_returns is False
 
 
+def test_buffer_pickled_before_the_episode_bookkeeping_is_refused_by_name():
+    state = make_buffer().__getstate__()
+    del state["_n_adds"]
+    with pytest.raises(ValueError, match="OffOnReplayBuffer was pickled by an sb3-offon older"):
+        OffOnReplayBuffer.__new__(OffOnReplayBuffer).__setstate__(state)
+
+
 def test_terminated_episode_never_bootstraps():
     buffer = make_buffer()
     buffer.truncation_value_fn = lambda obs: pytest.fail("a terminated episode must not be bootstrapped")

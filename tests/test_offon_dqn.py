@@ -399,7 +399,8 @@ def test_save_load_model_buffer_and_resume(tmp_path):
     for ours, theirs in zip(model.policy.state_dict().values(), loaded.policy.state_dict().values(), strict=True):
         assert th.equal(ours, theirs)
 
-    loaded.load_replay_buffer(tmp_path / "buffer.pkl")
+    # truncate_last_traj=False: the buffer exactly as it was saved, its episode still running
+    loaded.load_replay_buffer(tmp_path / "buffer.pkl", truncate_last_traj=False)
     buffer, original = loaded.replay_buffer, model.replay_buffer
     assert isinstance(buffer, OffOnReplayBuffer)
     np.testing.assert_array_equal(buffer.mc_returns, original.mc_returns)
@@ -407,12 +408,30 @@ def test_save_load_model_buffer_and_resume(tmp_path):
     np.testing.assert_array_equal(buffer.episode_lengths, original.episode_lengths)
     assert buffer.truncation_value_fn is None  # mc_truncation="terminal"
 
-    open_envs = buffer.episode_lengths > 0
+    last_slot = original.pos - 1
+    assert buffer.episode_lengths[0] > 0 and np.isnan(buffer.mc_returns[last_slot, 0]), "600 steps end mid-episode"
     loaded.learn(300, reset_num_timesteps=False)
     assert loaded.num_timesteps == 900
-    if open_envs.any():
-        # The env was reset by load: the episode open in the buffer was ended (cut), so its returns are known
-        assert not np.isnan(buffer.mc_returns[(original.pos - 1) % buffer.buffer_size, 0])
+    # The env was reset by load: the episode open in the buffer was ended (cut), so its returns are known
+    assert not np.isnan(buffer.mc_returns[last_slot, 0])
+
+
+def test_loading_a_buffer_ends_its_running_episodes_unless_told_they_go_on(tmp_path):
+    model = OffOnDQN("MlpPolicy", "CartPole-v1", seed=3, mc_truncation="terminal", **SMALL).learn(600)
+    model.save_replay_buffer(tmp_path / "buffer.pkl")
+    length, last_slot = int(model.replay_buffer.episode_lengths[0]), model.replay_buffer.pos - 1
+    episode = slice(last_slot - length + 1, last_slot + 1)
+    assert length > 0 and np.isnan(model.replay_buffer.mc_returns[episode, 0]).all(), "600 steps end mid-episode"
+
+    # A live model (its env mid-episode) loads another run's buffer: that run's episode must not chain into this one
+    live = OffOnDQN("MlpPolicy", "CartPole-v1", seed=4, mc_truncation="terminal", **SMALL).learn(50)
+    live.load_replay_buffer(tmp_path / "buffer.pkl")
+    buffer = live.replay_buffer
+    assert buffer.episode_lengths[0] == 0
+    np.testing.assert_allclose(buffer.mc_returns[episode, 0], discounted_returns(buffer.rewards[episode, 0], 0.99), rtol=1e-5)
+
+    live.load_replay_buffer(tmp_path / "buffer.pkl", truncate_last_traj=False)
+    assert live.replay_buffer.episode_lengths[0] == length and np.isnan(live.replay_buffer.mc_returns[episode, 0]).all()
 
 
 def test_loaded_buffer_gets_the_bootstrap_value_function_back(tmp_path):
@@ -428,6 +447,7 @@ def test_loaded_buffer_gets_the_bootstrap_value_function_back(tmp_path):
 def test_continued_learning_keeps_episodes_open():
     model = OffOnDQN("MlpPolicy", "CartPole-v1", **SMALL)
     buffer = model.replay_buffer
+    linked = 0
     for _ in range(5):
         model.learn(8, reset_num_timesteps=False)
         last_slot = buffer.pos - 1
@@ -436,8 +456,12 @@ def test_continued_learning_keeps_episodes_open():
         if was_running:
             # Same env, not reset: the running episode went on instead of being cut, so the action links up
             assert buffer.next_actions[last_slot, 0] == buffer.actions[last_slot + 1, 0, 0]
+            linked += 1
+    assert linked > 0, "some learn() call must have ended mid-episode"
+    last_slot = buffer.pos - 1
+    assert buffer.episode_lengths[0] > 0 and np.isnan(buffer.mc_returns[last_slot, 0]), "60 steps end mid-episode"
     model.learn(4)  # reset_num_timesteps=True resets the env: the running episode is cut and gets its returns
-    assert not np.isnan(buffer.mc_returns[buffer.pos - 5, 0])
+    assert not np.isnan(buffer.mc_returns[last_slot, 0])
 
 
 # --- observation types, n-step, other buffers --------------------------------------------------------------------
@@ -466,6 +490,46 @@ def test_n_steps_uses_the_n_step_buffer_without_warning():
         model = OffOnDQN("MlpPolicy", "CartPole-v1", n_steps=3, **SMALL)
     assert isinstance(model.replay_buffer, OffOnNStepReplayBuffer) and model.replay_buffer.n_steps == 3
     model.learn(300)
+
+
+def test_a_custom_n_step_buffer_gets_the_models_n_steps_and_gamma():
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # n_steps is not ignored: SB3's warning must not fire
+        model = OffOnDQN("MlpPolicy", "CartPole-v1", n_steps=5, gamma=0.9, replay_buffer_class=OffOnNStepReplayBuffer, **SMALL)
+    assert model.replay_buffer.n_steps == 5 and model.replay_buffer.gamma == 0.9
+    # SB3's way for a custom buffer (the model's n_steps left at 1) still works
+    kwargs = {"replay_buffer_class": OffOnNStepReplayBuffer, "replay_buffer_kwargs": {"n_steps": 4}}
+    assert OffOnDQN("MlpPolicy", "CartPole-v1", **kwargs, **SMALL).replay_buffer.n_steps == 4
+
+
+@pytest.mark.parametrize(
+    "model_kwargs, buffer_kwargs",
+    [
+        ({"n_steps": 5, "replay_buffer_class": OffOnNStepReplayBuffer}, {"n_steps": 3}),
+        ({"gamma": 0.9}, {"gamma": 0.99}),
+        ({"n_steps": 3, "gamma": 0.9}, {"gamma": 0.95}),
+    ],
+)
+def test_buffer_discounting_that_differs_from_the_models_names_it(model_kwargs, buffer_kwargs):
+    key = next(iter(buffer_kwargs))
+    with pytest.raises(ValueError, match=rf"replay_buffer_kwargs\['{key}'\].*model's `{key}`"):
+        OffOnDQN("MlpPolicy", "CartPole-v1", replay_buffer_kwargs=buffer_kwargs, **model_kwargs, **SMALL)
+
+
+def test_a_model_loaded_with_another_gamma_and_n_steps_builds_its_buffer_with_them(tmp_path):
+    OffOnDQN("MlpPolicy", "CartPole-v1", n_steps=3, **SMALL).save(tmp_path / "model.zip")
+    loaded = OffOnDQN.load(tmp_path / "model.zip", env=gym.make("CartPole-v1"), gamma=0.9, n_steps=5)
+    assert loaded.replay_buffer.gamma == 0.9 and loaded.replay_buffer.n_steps == 5
+    assert loaded.replay_buffer_kwargs == {}, "the model's own values are not saved as the caller's buffer arguments"
+
+
+@pytest.mark.parametrize("name, value", [("mc_mixing", "Max"), ("mc_initial_prob", 7.0)])
+def test_load_checks_the_offon_arguments_it_is_given(tmp_path, name, value):
+    OffOnDQN("MlpPolicy", "CartPole-v1", **SMALL).save(tmp_path / "model.zip")
+    with pytest.raises(ValueError, match=name):
+        OffOnDQN.load(tmp_path / "model.zip", custom_objects={name: value})
+    with pytest.raises(ValueError, match=name):
+        OffOnDQN.load(tmp_path / "model.zip", **{name: value})
 
 
 def test_plain_buffer_warns_once_and_trains_with_qlearning():

@@ -142,6 +142,12 @@ class OffOnBufferMixin:
         return state
 
     def __setstate__(self, state: dict[str, Any]) -> None:
+        if "_n_adds" not in state:
+            # Development snapshots before the episode bookkeeping by add count (commit 57f9655) kept other fields
+            raise ValueError(
+                f"This {type(self).__name__} was pickled by an sb3-offon older than its episode bookkeeping and cannot be "
+                "loaded; train a fresh buffer (the model itself loads)"
+            )
         # Buffers pickled before mc_truncation="drop" existed bootstrapped or cut their truncations: they keep doing so
         state.setdefault("drop_truncated_returns", False)
         self.__dict__.update(state)

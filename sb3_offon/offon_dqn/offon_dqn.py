@@ -104,7 +104,9 @@ class OffOnDQN(DQN):
     :param replay_buffer_class: Replay buffer class to use. If ``None``, an Off-On buffer matching the observation
         space and ``n_steps`` is selected. A buffer that is not an ``OffOnBufferMixin`` (``HerReplayBuffer``, say)
         records no returns nor next actions: training then uses Q-learning targets only (with a warning).
-    :param replay_buffer_kwargs: Keyword arguments to pass to the replay buffer on creation.
+    :param replay_buffer_kwargs: Keyword arguments to pass to the replay buffer on creation. An Off-On buffer always
+        gets the model's ``gamma`` (and, for ``OffOnNStepReplayBuffer``, ``n_steps`` where the model's is above 1), so
+        that returns and TD targets share one discount; a different value given here is a ``ValueError``.
     :param optimize_memory_usage: Enable a memory efficient variant of the replay buffer at a cost of more complexity.
     :param n_steps: When n_step > 1, uses n-step returns for the TD targets; Sarsa then uses the action taken at the
         n-th next state. Monte-Carlo returns are unaffected.
@@ -133,7 +135,9 @@ class OffOnDQN(DQN):
         computed with the target network when the episode ends; ``"terminal"``, 0; ``"drop"``, none: the episode's
         returns stay unknown and its samples take TD targets. A bootstrapped return contains a network estimate and a
         "terminal" one leaves out the rewards after the cut (optimistic where they are negative), so with
-        ``mc_mixing="max"`` only ``"drop"`` bounds Q* from below with observed returns alone
+        ``mc_mixing="max"`` only ``"drop"`` bounds Q* from below with observed returns alone. A bootstrap is
+        computed once, when the episode ends, and not refreshed: episodes cut before ``learning_starts`` keep the
+        untrained target network's estimate (``"drop"`` avoids it)
     :param loss: ``"huber"`` (SB3's DQN) or ``"mse"`` (the paper)
     :param stats_window_size: Window size for the rollout logging, specifying the number of episodes to average
         the reported success rate, mean episode length, and mean reward over
@@ -222,7 +226,7 @@ class OffOnDQN(DQN):
             device=device,
             _init_setup_model=False,
         )
-        # Our buffers take gamma from here: work on a copy, so that the caller's dict is left as it was
+        # Work on a copy, so that the caller's dict is left as it was
         self.replay_buffer_kwargs = dict(self.replay_buffer_kwargs)
         self.mc_initial_prob = mc_initial_prob
         self.mc_final_prob = mc_final_prob
@@ -235,6 +239,7 @@ class OffOnDQN(DQN):
         self.mc_truncation = mc_truncation
         self.loss = loss
         self._check_offon_arguments()
+        self._check_buffer_discounting()
         # The target draws have a generator of their own: they never move the global RNGs that SB3 uses for
         # exploration and sampling, and its state is saved with the model, so a resumed run draws on.
         self.target_rng = np.random.default_rng(seed)
@@ -245,6 +250,7 @@ class OffOnDQN(DQN):
             self._setup_model()
 
     def _check_offon_arguments(self) -> None:
+        # Also run by _setup_model: load()'s kwargs and custom_objects reach the model without __init__
         for name in ("mc_initial_prob", "mc_final_prob", "qlearning_initial_prob", "qlearning_final_prob"):
             value = _real_number(name, getattr(self, name))
             if not 0.0 <= value <= 1.0:
@@ -265,28 +271,24 @@ class OffOnDQN(DQN):
                 raise ValueError(f"`{name}` must be one of {options}, got {value!r}")
 
     def _setup_model(self) -> None:
-        picks_buffer = self.replay_buffer_class is None
-        if picks_buffer:
-            if isinstance(self.observation_space, spaces.Dict):
-                if self.n_steps > 1:
-                    raise ValueError("`n_steps` > 1 is not supported for Dict observation spaces (as in SB3's DQN)")
-                self.replay_buffer_class = OffOnDictReplayBuffer
-            elif self.n_steps > 1:
-                self.replay_buffer_class = OffOnNStepReplayBuffer
-                self.replay_buffer_kwargs.update({"n_steps": self.n_steps})
-            else:
-                self.replay_buffer_class = OffOnReplayBuffer
-        if issubclass(self.replay_buffer_class, OffOnBufferMixin):  # type: ignore[arg-type]
-            self.replay_buffer_kwargs.setdefault("gamma", self.gamma)
+        self._check_offon_arguments()
+        if self.replay_buffer_class is None:
+            self.replay_buffer_class = self._default_replay_buffer_class()
+        # The model's gamma and n_steps are passed at each setup and not saved in replay_buffer_kwargs, so that a
+        # model loaded with another gamma or n_steps builds its buffer with them (models saved before kept them there)
+        user_kwargs = self.replay_buffer_kwargs
+        self.replay_buffer_kwargs = {**user_kwargs, **self._buffer_discounting(self.replay_buffer_class, user_kwargs)}
 
         # SB3's setup calls set_random_seed(self.seed): keep the draws' generator as it is (a loaded model draws on)
         target_rng = self.target_rng
-        with warnings.catch_warnings():
-            if picks_buffer or issubclass(self.replay_buffer_class, OffOnNStepReplayBuffer):  # type: ignore[arg-type]
-                # We picked the buffer (or built it at the first setup), with n_steps passed on: SB3's warning that
-                # n_steps is ignored for a custom replay_buffer_class does not apply.
-                warnings.filterwarnings("ignore", message="`n_steps=.*is ignored")
-            super()._setup_model()
+        try:
+            with warnings.catch_warnings():
+                if issubclass(self.replay_buffer_class, OffOnNStepReplayBuffer):  # type: ignore[arg-type]
+                    # n_steps is passed on to our n-step buffer: SB3's warning that it is ignored does not apply
+                    warnings.filterwarnings("ignore", message="`n_steps=.*is ignored")
+                super()._setup_model()
+        finally:
+            self.replay_buffer_kwargs = user_kwargs
         self.target_rng = target_rng
 
         self.mc_schedule = LinearSchedule(self.mc_initial_prob, self.mc_final_prob, self.mc_fraction)
@@ -294,6 +296,36 @@ class OffOnDQN(DQN):
             self.qlearning_initial_prob, self.qlearning_final_prob, self.qlearning_fraction
         )
         self._connect_replay_buffer()
+
+    def _default_replay_buffer_class(self) -> type[ReplayBuffer]:
+        """The Off-On buffer for the observation space and ``n_steps`` (as SB3's DQN picks among its own)."""
+        if isinstance(self.observation_space, spaces.Dict):
+            if self.n_steps > 1:
+                raise ValueError("`n_steps` > 1 is not supported for Dict observation spaces (as in SB3's DQN)")
+            return OffOnDictReplayBuffer
+        return OffOnNStepReplayBuffer if self.n_steps > 1 else OffOnReplayBuffer
+
+    def _buffer_discounting(self, buffer_class: type[ReplayBuffer], buffer_kwargs: dict[str, Any]) -> dict[str, Any]:
+        """The model's ``gamma`` and ``n_steps`` for an Off-On buffer (nothing for another buffer class)."""
+        if not issubclass(buffer_class, OffOnBufferMixin):
+            return {}
+        discounting: dict[str, Any] = {"gamma": self.gamma}
+        # SB3's way to ask a custom buffer for n-step returns, replay_buffer_kwargs={"n_steps": n}, still works
+        if issubclass(buffer_class, OffOnNStepReplayBuffer) and (self.n_steps > 1 or "n_steps" not in buffer_kwargs):
+            discounting["n_steps"] = self.n_steps
+        return discounting
+
+    def _check_buffer_discounting(self) -> None:
+        # The caller's arguments only: a loaded model may hold the values it was saved with, which setup replaces
+        if not {"gamma", "n_steps"} & set(self.replay_buffer_kwargs):
+            return  # (load() builds the model without an env: no observation space to pick a buffer class by)
+        buffer_class = self.replay_buffer_class or self._default_replay_buffer_class()
+        for key, value in self._buffer_discounting(buffer_class, self.replay_buffer_kwargs).items():
+            if key in self.replay_buffer_kwargs and self.replay_buffer_kwargs[key] != value:
+                raise ValueError(
+                    f"`replay_buffer_kwargs['{key}']` ({self.replay_buffer_kwargs[key]!r}) differs from the model's "
+                    f"`{key}` ({value!r}): an Off-On buffer discounts returns and TD targets with the model's"
+                )
 
     def _connect_replay_buffer(self) -> None:
         if isinstance(self.replay_buffer, OffOnBufferMixin):
@@ -308,8 +340,18 @@ class OffOnDQN(DQN):
             )
 
     def load_replay_buffer(self, path: Any, truncate_last_traj: bool = True) -> None:
+        """
+        Load a replay buffer from a pickle file, and connect an Off-On buffer to this model.
+
+        :param path: Path to the pickled replay buffer.
+        :param truncate_last_traj: As for SB3's ``HerReplayBuffer``: if ``True``, the buffer's running episodes were
+            cut off (each ends as a time-limit truncation, per ``mc_truncation``); if ``False``, they go on with this
+            model's current env episodes (a buffer saved by this same live model, with no env reset in between).
+        """
         super().load_replay_buffer(path, truncate_last_traj)
         self._connect_replay_buffer()
+        if truncate_last_traj and isinstance(self.replay_buffer, OffOnBufferMixin):
+            self.replay_buffer.end_open_episodes()
 
     def _target_state_values(self, observations: np.ndarray | dict[str, np.ndarray]) -> np.ndarray:
         """max_a Q_target(s, a) of a batch of unnormalised observations (the bootstrap of truncated episodes)."""
