@@ -30,8 +30,14 @@ from search import BENCHMARK_ENVS, SCORE_RANGES, TOLERANCE
 
 BASELINE = "dqn"
 CHOICE = "offon_choice"
-SEEDS = 10
+FRESH_SEEDS = range(10, 20)
+SEEDS = len(FRESH_SEEDS)
 AUC_APART_AT_LEAST = 3
+
+
+def fresh_runs(runs: list[plot.Run]) -> list[plot.Run]:
+    """The runs on the head-to-head's fresh seeds: a run on another seed (a tuning seed, say) does not count."""
+    return [run for run in runs if run.seed in FRESH_SEEDS]
 
 
 def judge(scores: dict[str, dict[str, dict[str, np.ndarray]]], reps: int) -> tuple[str, list[str]]:
@@ -83,9 +89,10 @@ def main(argv: list[str] | None = None) -> str:
     scores: dict[str, dict[str, dict[str, np.ndarray]]] = {}
     for env, by_algo in plot.load_runs(args.root / args.set).items():
         for algo in (BASELINE, CHOICE):
-            if algo in by_algo:
-                grid, curves = plot.evaluation_curves(by_algo[algo])
-                scores.setdefault(env, {})[algo] = plot.run_scores(by_algo[algo], grid, curves, 3, plot.threshold(env))
+            runs = fresh_runs(by_algo.get(algo, []))
+            if runs:
+                grid, curves = plot.evaluation_curves(runs)
+                scores.setdefault(env, {})[algo] = plot.run_scores(runs, grid, curves, 3, plot.threshold(env))
     verdict, lines = judge(scores, args.reps)
     print("\n".join(lines))
     print(f"Verdict: {verdict}")

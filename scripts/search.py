@@ -131,7 +131,8 @@ def specs_of(
     """The benchmark specs of a candidate's runs, each with its results root."""
     pairs = []
     for env in envs:
-        argv = ["--set", "tuned", "--algos", candidate.algo, "--envs", env, "--seeds", *map(str, seeds)]
+        # One "a-a" range per seed: benchmark.py reads a lone number as a count of seeds
+        argv = ["--set", "tuned", "--algos", candidate.algo, "--envs", env, "--seeds", *(f"{seed}-{seed}" for seed in seeds)]
         argv += ["--eval-episodes", str(EVAL_EPISODES.get(env, 10)), "--device", device]
         if candidate.hyperparams:
             argv += ["--hyperparams", *candidate.hyperparams]
@@ -186,11 +187,11 @@ def run_scores(folder: Path, last: int = 3) -> tuple[float, float] | None:
     return float(returns[-last:].mean()), float(auc)
 
 
-def collect(candidate: Candidate, env: str) -> np.ndarray:
+def collect(candidate: Candidate, env: str, search_root: Path = SEARCH_ROOT) -> np.ndarray:
     """(seeds, 2): final return and AUC of each finished tuning-seed run (fewer rows while runs are missing)."""
     rows = []
     for seed in TUNING_SEEDS:
-        folder = candidate_root(candidate, env) / "tuned" / candidate.algo / f"{env}_{seed}"
+        folder = candidate_root(candidate, env, search_root) / "tuned" / candidate.algo / f"{env}_{seed}"
         scores = run_scores(folder)
         if scores is not None:
             rows.append(scores)
@@ -237,7 +238,7 @@ def bar_verdict(eligible: bool, complete: bool) -> str:
 
 
 def report(args: argparse.Namespace) -> int:
-    scores = {name: {env: collect(BY_NAME[name], env) for env in BY_NAME[name].envs} for name in BY_NAME}
+    scores = {name: {env: collect(BY_NAME[name], env, args.search_root) for env in BY_NAME[name].envs} for name in BY_NAME}
     lines = [
         "# Search of issue 13: every candidate on the tuning seeds 0-4",
         "",
@@ -333,6 +334,7 @@ def main(argv: list[str] | None = None) -> int:
     run_parser.add_argument("--dry-run", action="store_true")
     report_parser = commands.add_parser("report", help="write the summary of the finished runs")
     report_parser.add_argument("--out", default="results/search/summary.md")
+    report_parser.add_argument("--search-root", type=Path, default=SEARCH_ROOT, help="where the search's own runs are")
     args = parser.parse_args(argv)
     return run(args) if args.command == "run" else report(args)
 

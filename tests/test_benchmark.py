@@ -369,6 +369,12 @@ def test_aggregate_waits_for_an_env_until_every_variant_has_its_seeds():
     assert complete["envs"] == ["A", "B"] and complete["left_out"] == {} and complete["runs"] == {"dqn": 3, "qrdqn": 3}
 
 
+def test_headtohead_rule_counts_only_the_fresh_seeds():
+    module = load_script("headtohead_rule")
+    runs = [module.plot.Run("dqn", "CartPole-v1", seed, 100, np.array([100]), np.array([0.0]), None) for seed in range(25)]
+    assert [run.seed for run in module.fresh_runs(runs)] == list(range(10, 20))
+
+
 def test_bootstrap_intervals_are_the_same_at_every_redraw():
     module = load_script("plot")
     values = np.random.default_rng(0).normal(size=(10, 5))
@@ -378,6 +384,15 @@ def test_bootstrap_intervals_are_the_same_at_every_redraw():
     for a, b in zip(first, second, strict=True):
         np.testing.assert_array_equal(a, b)
     assert np.all(first[1] < first[0]) and np.all(first[0] < first[2]), "a real interval around the mean"
+
+
+def test_search_runs_the_seeds_it_is_given(tmp_path: Path):
+    """``search.py run --seeds 3`` is seed 3 (benchmark.py alone would read a lone number as a count)."""
+    module = load_script("search")
+    candidate = module.BY_NAME["max_drop"]
+    for seeds in ([3], [0], [1, 4]):
+        specs = module.specs_of(candidate, ["CartPole-v1"], seeds, "cpu", tmp_path)
+        assert [spec["seed"] for spec, _ in specs] == seeds and all(root == tmp_path / "max_drop" for _, root in specs)
 
 
 def test_search_round2_verdict_from_hand_made_scores():
