@@ -209,7 +209,8 @@ def test_plot_writes_every_figure_and_table(local_root: Path, tmp_path: Path):
 
 
 def table_rows(text: str) -> list[str]:
-    return [line for line in text.splitlines() if line.startswith("|")]
+    """The table rows and the generated lines that say what the aggregate covers."""
+    return [line for line in text.splitlines() if line.startswith(("|", "Envs: "))]
 
 
 def readme_with_blocks(*blocks: str) -> str:
