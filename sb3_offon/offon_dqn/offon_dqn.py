@@ -238,7 +238,8 @@ class OffOnDQN(DQN):
         self.sarsa_target = sarsa_target
         self.mc_truncation = mc_truncation
         self.loss = loss
-        self._check_offon_arguments()
+        # The Off-On arguments are checked by _setup_model (which load() also runs); the buffer's discounting here, on
+        # the caller's arguments only
         self._check_buffer_discounting()
         # The target draws have a generator of their own: they never move the global RNGs that SB3 uses for
         # exploration and sampling, and its state is saved with the model, so a resumed run draws on.
@@ -250,7 +251,7 @@ class OffOnDQN(DQN):
             self._setup_model()
 
     def _check_offon_arguments(self) -> None:
-        # Also run by _setup_model: load()'s kwargs and custom_objects reach the model without __init__
+        # Run by _setup_model rather than __init__: load()'s kwargs and custom_objects reach the model without __init__
         for name in ("mc_initial_prob", "mc_final_prob", "qlearning_initial_prob", "qlearning_final_prob"):
             value = _real_number(name, getattr(self, name))
             if not 0.0 <= value <= 1.0:
@@ -316,7 +317,7 @@ class OffOnDQN(DQN):
         return discounting
 
     def _check_buffer_discounting(self) -> None:
-        # The caller's arguments only: a loaded model may hold the values it was saved with, which setup replaces
+        # Not in _setup_model: a model saved before this check may hold its old values there, which setup replaces
         if not {"gamma", "n_steps"} & set(self.replay_buffer_kwargs):
             return  # (load() builds the model without an env: no observation space to pick a buffer class by)
         buffer_class = self.replay_buffer_class or self._default_replay_buffer_class()
