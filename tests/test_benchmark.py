@@ -73,17 +73,20 @@ def test_a_grid_named_apart_from_its_set(tmp_path: Path):
     assert sorted(targets) == sorted(
         str(tmp_path / "headtohead" / algo / f"CartPole-v1_{seed}") for algo in ALGOS for seed in (10, 11)
     )
-    assert all("-conf" not in line for line in output.splitlines() if "sb3_offon.train" in line), "the tuned settings"
+    commands = [line for line in output.splitlines() if "sb3_offon.train" in line]
+    assert len(commands) == len(targets) == 2 * len(ALGOS)
+    assert all("-conf" not in line for line in commands), "the tuned settings"
 
 
 def test_mlp_runs_train_on_the_cpu_unless_told_otherwise(tmp_path: Path):
     module = load_script("benchmark")
     assert module.default_device("MlpPolicy") == "cpu"
     assert module.default_device("CnnPolicy") == "auto"
-    output = check(benchmark(tmp_path, "--dry-run", "--seeds", "1"))
-    assert all("--device cpu" in line for line in output.splitlines() if "sb3_offon.train" in line)
-    output = check(benchmark(tmp_path, "--dry-run", "--seeds", "1", "--device", "cuda"))
-    assert all("--device cuda" in line for line in output.splitlines() if "sb3_offon.train" in line)
+    for extra, device in [((), "cpu"), (("--device", "cuda"), "cuda")]:
+        output = check(benchmark(tmp_path, "--dry-run", "--seeds", "1", *extra))
+        commands = [line for line in output.splitlines() if "sb3_offon.train" in line]
+        assert commands, "the dry run lists its commands"
+        assert all(f"--device {device}" in line for line in commands)
 
 
 def load_script(name: str):

@@ -147,16 +147,16 @@ def test_terminated_episode_never_bootstraps():
 
 def test_two_envs_with_different_episode_lengths():
     buffer = make_buffer(n_envs=2)
-    buffer.truncation_value_fn = lambda obs: np.asarray(obs).reshape(-1) * 0 + 4.0
-    # env 0: episode A = [1, 1] terminated at step 1, then episode B = [2, 2, 2] truncated at step 4
-    # env 1: one episode [10, 0, 0, 0, 8] terminated at step 4
+    buffer.truncation_value_fn = lambda obs: np.asarray(obs).reshape(-1)  # value = the final observation's id
+    # env 0: episode A = [1, 1] terminated at step 1, then episode B = [2, 4, 8] truncated at step 4 (final obs 12)
+    # env 1: one episode [10, 0, 0, 0, 8] terminated at step 4 (next obs 30, which must not be used)
     step(buffer, [1, 10], [0, 0])
     step(buffer, [1, 0], [1, 1], dones=[True, False])
     step(buffer, [2, 0], [2, 2])
-    step(buffer, [2, 0], [3, 3])
-    step(buffer, [2, 8], [4, 4], dones=[True, True], truncated=[True, False])
-    # env 0, episode A: G = [1 + 0.5, 1]; episode B with tail 4: G_4 = 2 + 2 = 4, G_3 = 2 + 2 = 4, G_2 = 4
-    np.testing.assert_allclose(buffer.mc_returns[:5, 0], [1.5, 1.0, 4.0, 4.0, 4.0])
+    step(buffer, [4, 0], [3, 3])
+    step(buffer, [8, 8], [4, 4], dones=[True, True], truncated=[True, False], next_obs_ids=[12, 30])
+    # env 0, episode A: G = [1 + 0.5, 1]; episode B with tail V = 12: G_4 = 8 + 6 = 14, G_3 = 4 + 7 = 11, G_2 = 2 + 5.5
+    np.testing.assert_allclose(buffer.mc_returns[:5, 0], [1.5, 1.0, 7.5, 11.0, 14.0])
     # env 1: G_4 = 8, G_3 = 4, G_2 = 2, G_1 = 1, G_0 = 10 + 0.5
     np.testing.assert_allclose(buffer.mc_returns[:5, 1], [10.5, 1.0, 2.0, 4.0, 8.0])
 
@@ -167,11 +167,12 @@ def test_ring_wrap_around_forgets_overwritten_returns():
         step(buffer, [reward], [0], dones=[done])
     np.testing.assert_allclose(buffer.mc_returns[:3, 0], [1.75, 1.5, 1.0])
     step(buffer, [2], [0])  # slot 3
-    step(buffer, [2], [0])  # slot 0: overwrites the first transition of the old episode
+    step(buffer, [3], [0])  # slot 0: overwrites the first transition of the old episode
     assert np.isnan(buffer.mc_returns[0, 0]), "an overwritten slot loses its old return"
     np.testing.assert_allclose(buffer.mc_returns[1:3, 0], [1.5, 1.0])
-    step(buffer, [4], [0], dones=[True])  # slot 1: the episode [2, 2, 4] ends in slots 3, 0, 1
-    np.testing.assert_allclose(buffer.mc_returns[[3, 0, 1], 0], [2 + 1 + 1, 2 + 2, 4])
+    step(buffer, [4], [0], dones=[True])  # slot 1: the episode [2, 3, 4] ends in slots 3, 0, 1
+    # G = [2 + 0.5 * 5, 3 + 0.5 * 4, 4]: the slots hold the episode in order across the array's end
+    np.testing.assert_allclose(buffer.mc_returns[[3, 0, 1], 0], [4.5, 5.0, 4.0])
     np.testing.assert_allclose(buffer.mc_returns[2, 0], 1.0)
 
 
@@ -230,34 +231,59 @@ def test_n_step_next_action_is_taken_at_the_nth_next_state():
     np.testing.assert_array_equal(next_actions, [3, 4, -1, -1, -1, -1, -1])
 
 
-def test_samples_carry_returns_and_next_actions_of_their_own_slot_and_env():
+def test_n_step_next_action_window_across_the_end_of_the_array():
+    buffer = make_buffer(buffer_size=4, buffer_class=OffOnNStepReplayBuffer, n_steps=2)
+    # One running episode of 6 steps with actions t % 5: steps 2..5 are held, in slots 2, 3, 0, 1 (slot 1 the newest)
+    for t in range(6):
+        step(buffer, [0], [t % 5])
+    next_actions = buffer._sarsa_next_actions(np.arange(4), np.zeros(4, dtype=int))
+    # slot 2 (step 2): action at step 4 = 4; slot 3 (step 3): its window goes on in slot 0, action at step 5 = 0;
+    # slot 0 (step 4): step 6 is not there yet -> unknown; slot 1 (step 5): the newest -> unknown. The window never
+    # runs from the newest slot into the oldest
+    np.testing.assert_array_equal(next_actions, [-1, -1, 4, 0])
+
+
+@pytest.mark.parametrize("n_adds", [50, 137], ids=["full", "wrapped-twice"])
+def test_samples_carry_returns_and_next_actions_of_their_own_slot_and_env(n_adds):
+    """Three envs with random episode ends, checked against an independent per-step record of every episode."""
     n_envs, buffer_size = 3, 50
     buffer = make_buffer(buffer_size=buffer_size, n_envs=n_envs)
     rng = np.random.default_rng(0)
-    expected_returns = np.full((buffer_size, n_envs), np.nan)
-    expected_next = np.full((buffer_size, n_envs), -1)
+    returns_by_step = np.full((n_adds, n_envs), np.nan)
+    next_by_step = np.full((n_adds, n_envs), -1)
     episodes = [[] for _ in range(n_envs)]
-    for t in range(buffer_size):
+    for t in range(n_adds):
         rewards = rng.integers(0, 5, n_envs).astype(np.float32)
         actions = rng.integers(0, 5, n_envs)
         dones = rng.random(n_envs) < 0.2
         for env in range(n_envs):
             if episodes[env]:
-                expected_next[episodes[env][-1][0], env] = actions[env]
+                next_by_step[episodes[env][-1][0], env] = actions[env]
             episodes[env].append((t, rewards[env]))
             if dones[env]:
-                slots, episode_rewards = zip(*episodes[env], strict=True)
-                expected_returns[list(slots), env] = discounted_returns(np.array(episode_rewards), GAMMA)
+                steps, episode_rewards = zip(*episodes[env], strict=True)
+                returns_by_step[list(steps), env] = discounted_returns(np.array(episode_rewards), GAMMA)
                 episodes[env] = []
+        # The observation's id names its step and env, which are what the expected values are looked up by
         step(buffer, rewards, actions, dones=dones, obs_ids=t * 10 + np.arange(n_envs))
+    # Slot t % buffer_size holds the latest step t written there; returns of episodes that began in overwritten
+    # steps still count their rewards
+    held = np.arange(max(0, n_adds - buffer_size), n_adds)
+    expected_returns = np.full((buffer_size, n_envs), np.nan)
+    expected_next = np.full((buffer_size, n_envs), -1)
+    expected_returns[held % buffer_size] = returns_by_step[held]
+    expected_next[held % buffer_size] = next_by_step[held]
     np.testing.assert_allclose(buffer.mc_returns, expected_returns, rtol=1e-6)
     np.testing.assert_array_equal(buffer.next_actions, expected_next)
+    if n_adds > buffer_size:
+        assert np.isfinite(expected_returns).sum() > 50 and (expected_next >= 0).sum() > 50
 
     samples = buffer.sample(500)
     ids = samples.observations.numpy().reshape(-1).astype(int)
-    slots, envs = ids // 10, ids % 10
-    np.testing.assert_allclose(samples.mc_returns.numpy().reshape(-1), expected_returns[slots, envs], rtol=1e-6)
-    np.testing.assert_array_equal(samples.next_actions.numpy().reshape(-1), expected_next[slots, envs])
+    steps, envs = ids // 10, ids % 10
+    assert (steps >= held[0]).all(), "only held steps are sampled"
+    np.testing.assert_allclose(samples.mc_returns.numpy().reshape(-1), returns_by_step[steps, envs], rtol=1e-6)
+    np.testing.assert_array_equal(samples.next_actions.numpy().reshape(-1), next_by_step[steps, envs])
     assert samples.mc_returns.shape == (500, 1) and samples.next_actions.shape == (500, 1)
     assert samples.discounts is None
 

@@ -94,8 +94,9 @@ def mask_tensor(mask: np.ndarray | None) -> th.Tensor | None:
     return None if mask is None else th.as_tensor(mask)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture
 def model():
+    # A fresh model per test: tests set probabilities, the exploration rate and options on it
     return OffOnDQN("MlpPolicy", "CartPole-v1", seed=0, **SMALL)
 
 
@@ -202,7 +203,6 @@ def test_random_choice_follows_the_probabilities(model):
 
 def test_n_step_discounts_are_respected(model):
     data = crafted_batch(model)._replace(discounts=th.full((400, 1), 0.5))
-    model.mc_prob, model.qlearning_prob = 0.0, 0.0
     targets, _, _ = targets_at(model, data, mc=0.0, qlearning=0.0)
     with th.no_grad():
         next_q = model.q_net_target(data.next_observations)
@@ -316,7 +316,13 @@ def test_reward_normalisation_scales_returns_like_rewards():
     """The buffer keeps raw rewards and raw returns; VecNormalize's reward scale is applied to both at sampling."""
     venv = VecNormalize(DummyVecEnv([lambda: gym.make("CartPole-v1", max_episode_steps=15)]), norm_obs=False, gamma=0.9)
     model = OffOnDQN("MlpPolicy", venv, gamma=0.9, seed=0, exploration_final_eps=1.0, **{**SMALL, "learning_starts": 10_000})
-    model.learn(300)
+    scales_by_step = []  # the reward scale after each env step: the one the buffer's add() of that step sees
+
+    def record_scale(_locals, _globals) -> bool:
+        scales_by_step.append(float(np.sqrt(venv.ret_rms.var + venv.epsilon)))
+        return True
+
+    model.learn(300, callback=record_scale)
     buffer = model.replay_buffer
     scale = np.sqrt(venv.ret_rms.var + venv.epsilon)
     assert abs(scale - 1.0) > 0.1, "a scale of 1 would not test anything"
@@ -333,10 +339,19 @@ def test_reward_normalisation_scales_returns_like_rewards():
     np.testing.assert_allclose(samples.rewards.numpy()[:, 0], buffer.rewards[slots, 0] / scale, rtol=1e-5)
     np.testing.assert_allclose(samples.mc_returns.numpy()[:, 0], buffer.mc_returns[slots, 0] / scale, rtol=1e-5)
     # A truncation's bootstrap, max_a Q_target (learnt from normalised rewards), enters the raw return times the scale
+    # of the moment the episode ended (no gradient step: the target network is the same throughout)
     final_obs = buffer.next_observations[:3, 0]
     with th.no_grad():
         q_values = model.q_net_target(th.as_tensor(final_obs)).max(dim=1).values.numpy()
     np.testing.assert_allclose(model._target_state_values(final_obs), q_values * scale, rtol=1e-5)
+    truncated = [i for i in range(1, len(ends)) if buffer.timeouts[ends[i], 0]]
+    assert len(truncated) >= 3 and len(scales_by_step) == buffer.pos
+    for i in truncated:
+        start, end = ends[i - 1] + 1, ends[i]
+        with th.no_grad():
+            tail = model.q_net_target(th.as_tensor(buffer.next_observations[end, :1])).max().item() * scales_by_step[end]
+        expected = discounted_returns(buffer.rewards[start : end + 1, 0], 0.9, tail)
+        np.testing.assert_allclose(buffer.mc_returns[start : end + 1, 0], expected, rtol=1e-5)
 
 
 def test_set_random_seed_reseeds_the_target_draws():
@@ -445,7 +460,7 @@ def test_loaded_buffer_gets_the_bootstrap_value_function_back(tmp_path):
 
 
 def test_continued_learning_keeps_episodes_open():
-    model = OffOnDQN("MlpPolicy", "CartPole-v1", **SMALL)
+    model = OffOnDQN("MlpPolicy", "CartPole-v1", seed=0, **SMALL)  # seeded: where episodes end must not depend on test order
     buffer = model.replay_buffer
     linked = 0
     for _ in range(5):
@@ -488,8 +503,9 @@ def test_n_steps_uses_the_n_step_buffer_without_warning():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         model = OffOnDQN("MlpPolicy", "CartPole-v1", n_steps=3, **SMALL)
-    assert isinstance(model.replay_buffer, OffOnNStepReplayBuffer) and model.replay_buffer.n_steps == 3
-    model.learn(300)
+        assert isinstance(model.replay_buffer, OffOnNStepReplayBuffer) and model.replay_buffer.n_steps == 3
+        model.learn(300)
+    assert model._n_updates > 0 and np.isfinite(model.replay_buffer.mc_returns).any()
 
 
 def test_a_custom_n_step_buffer_gets_the_models_n_steps_and_gamma():
@@ -533,12 +549,18 @@ def test_load_checks_the_offon_arguments_it_is_given(tmp_path, name, value):
 
 
 def test_plain_buffer_warns_once_and_trains_with_qlearning():
+    # With the default (Monte-Carlo and Sarsa) probabilities: a plain buffer has no returns or next actions, so every
+    # target is Q-learning's and training is DQN's, bit for bit
+    env_kwargs = dict(env_id="CartPole-v1", n_envs=2, seed=5)
     with pytest.warns(UserWarning, match="Q-learning targets only"):
-        model = OffOnDQN("MlpPolicy", "CartPole-v1", replay_buffer_class=ReplayBuffer, **SMALL)
+        model = OffOnDQN("MlpPolicy", make_vec_env(**env_kwargs), replay_buffer_class=ReplayBuffer, seed=5, **SMALL)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        model.learn(300)
+        model.learn(600)
+    dqn = DQN("MlpPolicy", make_vec_env(**env_kwargs), seed=5, **SMALL).learn(600)
     assert model._n_updates > 0
+    for (name, ours), (_, theirs) in zip(model.policy.state_dict().items(), dqn.policy.state_dict().items(), strict=True):
+        assert th.equal(ours, theirs), name
 
 
 # --- bad input ---------------------------------------------------------------------------------------------------
@@ -663,7 +685,21 @@ def test_tensorboard_default_run_name(tmp_path):
 
 def test_discrete_observations_with_truncated_episodes():
     # IdentityEnv ends every episode by truncation: the bootstrap sees Discrete observations in the buffer's layout
-    model = OffOnDQN("MlpPolicy", IdentityEnv(5, ep_length=20), **{**SMALL, "learning_starts": 30})
-    model.learn(100)
-    model.learn(30)  # a second learn() resets the env and ends the open episode, bootstrapped the same way
-    assert not np.isnan(model.replay_buffer.mc_returns[:120]).any()
+    model = OffOnDQN("MlpPolicy", IdentityEnv(5, ep_length=20), gamma=0.9, **{**SMALL, "learning_starts": 30})
+    model.learn(110)
+    buffer, n = model.replay_buffer, model.replay_buffer.pos
+
+    def bootstrapped_returns(start: int, end: int) -> np.ndarray:
+        final_obs = th.as_tensor(buffer.next_observations[end - 1, 0][None])
+        with th.no_grad():
+            tail = model.q_net_target(final_obs).max().item()
+        return discounted_returns(buffer.rewards[start:end, 0], 0.9, tail)
+
+    assert n % 20 != 0 and np.isnan(buffer.mc_returns[n - n % 20 : n, 0]).all(), "learn() stopped mid-episode"
+    assert np.isfinite(buffer.mc_returns[: n - n % 20, 0]).all(), "the finished (truncated) episodes have returns"
+    # A second learn() resets the env: the open episode ends as truncated at its last stored next observation, with
+    # the target network as it is now (no gradient step comes between the two)
+    expected_open = bootstrapped_returns(n - n % 20, n)
+    model.learn(8)
+    np.testing.assert_allclose(buffer.mc_returns[n - n % 20 : n, 0], expected_open, rtol=1e-5)
+    assert buffer.next_actions[n - 1, 0] == -1, "the cut episode does not chain into the next"
