@@ -54,7 +54,7 @@ def test_runs_taking_turns_learn_what_they_learn_alone(monkeypatch):
         assert run["env_steps"] == alone.num_timesteps
         assert run["episodes"] == len(alone.env.env_method("get_episode_lengths")[0])
         # Each run is timed only while it holds the baton: both times are parts of the pair's elapsed time
-        assert 0 < run["train_seconds"] <= run["learn_seconds"]
+        assert 0 < run["train_seconds"] < run["learn_seconds"]
         assert np.isfinite(run["steps_per_second"])
 
 

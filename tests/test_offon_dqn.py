@@ -7,6 +7,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch as th
+from helpers import assert_same_parameters
 from stable_baselines3 import DQN
 from stable_baselines3.common.buffers import ReplayBuffer
 from stable_baselines3.common.env_util import make_vec_env
@@ -92,6 +93,12 @@ def choose_and_compute(model: OffOnDQN, data, mc_drawn: np.ndarray, sarsa_drawn:
 
 def mask_tensor(mask: np.ndarray | None) -> th.Tensor | None:
     return None if mask is None else th.as_tensor(mask)
+
+
+def max_target_q(model: OffOnDQN, observation: np.ndarray) -> float:
+    """max_a Q_target(s, a) of one observation as the buffer stores it: the bootstrap of a cut-off episode."""
+    with th.no_grad():
+        return model.q_net_target(th.as_tensor(observation[None])).max().item()
 
 
 @pytest.fixture
@@ -269,10 +276,7 @@ def test_bit_identical_to_dqn_with_qlearning_only(extra):
 
     ours, theirs = train(OffOnDQN, **Q_ONLY), train(DQN)
     assert ours.num_timesteps == theirs.num_timesteps
-    for (name, ours_param), (_, their_param) in zip(
-        ours.policy.state_dict().items(), theirs.policy.state_dict().items(), strict=True
-    ):
-        assert th.equal(ours_param, their_param), name
+    assert_same_parameters(ours, theirs)
     # The Off-On bookkeeping ran all the same
     assert not np.isnan(ours.replay_buffer.mc_returns).all()
 
@@ -298,9 +302,7 @@ def test_returns_in_training_match_rewards_and_truncation_bootstrap():
         for end in ends:
             tail = 0.0
             if timeouts[end]:
-                final_obs = th.as_tensor(buffer.next_observations[end, env_index][None])
-                with th.no_grad():
-                    tail = model.q_net_target(final_obs).max().item()
+                tail = max_target_q(model, buffer.next_observations[end, env_index])
             expected = discounted_returns(rewards[start : end + 1], 0.9, tail)
             np.testing.assert_allclose(buffer.mc_returns[start : end + 1, env_index], expected, rtol=1e-5)
             next_actions = buffer.next_actions[start : end + 1, env_index]
@@ -348,8 +350,7 @@ def test_reward_normalisation_scales_returns_like_rewards():
     assert len(truncated) >= 3 and len(scales_by_step) == buffer.pos
     for i in truncated:
         start, end = ends[i - 1] + 1, ends[i]
-        with th.no_grad():
-            tail = model.q_net_target(th.as_tensor(buffer.next_observations[end, :1])).max().item() * scales_by_step[end]
+        tail = max_target_q(model, buffer.next_observations[end, 0]) * scales_by_step[end]
         expected = discounted_returns(buffer.rewards[start : end + 1, 0], 0.9, tail)
         np.testing.assert_allclose(buffer.mc_returns[start : end + 1, 0], expected, rtol=1e-5)
 
@@ -559,8 +560,7 @@ def test_plain_buffer_warns_once_and_trains_with_qlearning():
         model.learn(600)
     dqn = DQN("MlpPolicy", make_vec_env(**env_kwargs), seed=5, **SMALL).learn(600)
     assert model._n_updates > 0
-    for (name, ours), (_, theirs) in zip(model.policy.state_dict().items(), dqn.policy.state_dict().items(), strict=True):
-        assert th.equal(ours, theirs), name
+    assert_same_parameters(model, dqn)
 
 
 # --- bad input ---------------------------------------------------------------------------------------------------
@@ -688,18 +688,13 @@ def test_discrete_observations_with_truncated_episodes():
     model = OffOnDQN("MlpPolicy", IdentityEnv(5, ep_length=20), gamma=0.9, **{**SMALL, "learning_starts": 30})
     model.learn(110)
     buffer, n = model.replay_buffer, model.replay_buffer.pos
-
-    def bootstrapped_returns(start: int, end: int) -> np.ndarray:
-        final_obs = th.as_tensor(buffer.next_observations[end - 1, 0][None])
-        with th.no_grad():
-            tail = model.q_net_target(final_obs).max().item()
-        return discounted_returns(buffer.rewards[start:end, 0], 0.9, tail)
-
-    assert n % 20 != 0 and np.isnan(buffer.mc_returns[n - n % 20 : n, 0]).all(), "learn() stopped mid-episode"
-    assert np.isfinite(buffer.mc_returns[: n - n % 20, 0]).all(), "the finished (truncated) episodes have returns"
+    open_episode = slice(n - n % 20, n)
+    assert n % 20 != 0 and np.isnan(buffer.mc_returns[open_episode, 0]).all(), "learn() stopped mid-episode"
+    assert np.isfinite(buffer.mc_returns[: open_episode.start, 0]).all(), "the finished (truncated) episodes have returns"
     # A second learn() resets the env: the open episode ends as truncated at its last stored next observation, with
     # the target network as it is now (no gradient step comes between the two)
-    expected_open = bootstrapped_returns(n - n % 20, n)
+    tail = max_target_q(model, buffer.next_observations[n - 1, 0])
+    expected_open = discounted_returns(buffer.rewards[open_episode, 0], 0.9, tail)
     model.learn(8)
-    np.testing.assert_allclose(buffer.mc_returns[n - n % 20 : n, 0], expected_open, rtol=1e-5)
+    np.testing.assert_allclose(buffer.mc_returns[open_episode, 0], expected_open, rtol=1e-5)
     assert buffer.next_actions[n - 1, 0] == -1, "the cut episode does not chain into the next"

@@ -5,6 +5,7 @@ import sys
 import numpy as np
 import pytest
 import torch as th
+from helpers import assert_same_parameters
 from stable_baselines3 import DQN
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.envs import SimpleMultiObsEnv
@@ -50,13 +51,6 @@ class PerStepOffOnDQN(OffOnDQN):
             th.nn.utils.clip_grad_norm_(self.policy.parameters(), self.max_grad_norm)
             self.policy.optimizer.step()
         self._n_updates += gradient_steps
-
-
-def assert_same_parameters(ours, reference):
-    for (name, ours_param), (_, reference_param) in zip(
-        ours.policy.state_dict().items(), reference.policy.state_dict().items(), strict=True
-    ):
-        assert th.equal(ours_param, reference_param), name
 
 
 OPTIONS = {
