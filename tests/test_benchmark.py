@@ -40,6 +40,11 @@ def run_folders(root: Path) -> list[Path]:
     return [root / "paper" / algo / f"{ENV}_{seed}" for algo in ALGOS for seed in SEEDS]
 
 
+def train_commands(dry_run_output: str) -> list[str]:
+    """The training command lines that a ``--dry-run`` prints, one per planned run."""
+    return [line for line in dry_run_output.splitlines() if "sb3_offon.train" in line]
+
+
 def evaluations(folder: Path) -> dict[str, np.ndarray]:
     with np.load(folder / "evaluations.npz") as data:
         return {key: data[key] for key in data.files}
@@ -55,7 +60,7 @@ def local_root(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def test_dry_run_of_the_tuned_set(tmp_path: Path):
     output = check(benchmark(tmp_path, "--set", "tuned", "--dry-run", "--seeds", "3"))
-    commands = [line for line in output.splitlines() if "sb3_offon.train" in line]
+    commands = train_commands(output)
     # 2 algos x the tuned set's 4 envs x 3 seeds; tuned is sb3_offon.train's default file: no -conf
     assert len(commands) == 24
     assert all("-conf" not in line and "--num-threads 1" in line for line in commands)
@@ -73,7 +78,7 @@ def test_a_grid_named_apart_from_its_set(tmp_path: Path):
     assert sorted(targets) == sorted(
         str(tmp_path / "headtohead" / algo / f"CartPole-v1_{seed}") for algo in ALGOS for seed in (10, 11)
     )
-    commands = [line for line in output.splitlines() if "sb3_offon.train" in line]
+    commands = train_commands(output)
     assert len(commands) == len(targets) == 2 * len(ALGOS)
     assert all("-conf" not in line for line in commands), "the tuned settings"
 
@@ -84,7 +89,7 @@ def test_mlp_runs_train_on_the_cpu_unless_told_otherwise(tmp_path: Path):
     assert module.default_device("CnnPolicy") == "auto"
     for extra, device in [((), "cpu"), (("--device", "cuda"), "cuda")]:
         output = check(benchmark(tmp_path, "--dry-run", "--seeds", "1", *extra))
-        commands = [line for line in output.splitlines() if "sb3_offon.train" in line]
+        commands = train_commands(output)
         assert commands, "the dry run lists its commands"
         assert all(f"--device {device}" in line for line in commands)
 

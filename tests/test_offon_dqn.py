@@ -318,15 +318,20 @@ def test_reward_normalisation_scales_returns_like_rewards():
     """The buffer keeps raw rewards and raw returns; VecNormalize's reward scale is applied to both at sampling."""
     venv = VecNormalize(DummyVecEnv([lambda: gym.make("CartPole-v1", max_episode_steps=15)]), norm_obs=False, gamma=0.9)
     model = OffOnDQN("MlpPolicy", venv, gamma=0.9, seed=0, exploration_final_eps=1.0, **{**SMALL, "learning_starts": 10_000})
+
+    def reward_scale() -> float:
+        """What VecNormalize divides rewards by now."""
+        return float(np.sqrt(venv.ret_rms.var + venv.epsilon))
+
     scales_by_step = []  # the reward scale after each env step: the one the buffer's add() of that step sees
 
     def record_scale(_locals, _globals) -> bool:
-        scales_by_step.append(float(np.sqrt(venv.ret_rms.var + venv.epsilon)))
+        scales_by_step.append(reward_scale())
         return True
 
     model.learn(300, callback=record_scale)
     buffer = model.replay_buffer
-    scale = np.sqrt(venv.ret_rms.var + venv.epsilon)
+    scale = reward_scale()
     assert abs(scale - 1.0) > 0.1, "a scale of 1 would not test anything"
     # Raw units in the buffer: a terminated episode's returns are those of its raw rewards (CartPole: 1 per step)
     ends = np.flatnonzero(buffer.dones[: buffer.pos, 0])
