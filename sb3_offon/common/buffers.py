@@ -325,6 +325,65 @@ class OffOnBufferMixin:
         """
         return th.from_numpy(array).to(self.device)
 
+    # --- access by (slot, env) for the lambda-returns of OffOnDQN's mc_mixing="lambda" ---------------------------
+
+    def chronology(self) -> tuple[int, int, int]:
+        """
+        Where the stored transitions are, in the order they were added (the same for every env column).
+
+        :return: ``(oldest, n_stored, first)``: the slot of the oldest transition, the number of transitions per env,
+            and the chronological index of the first one that can be trained on (1 with ``optimize_memory_usage`` on a
+            full buffer, where the oldest slot's observation was overwritten by the newest's next observation, else 0).
+            Chronological index ``j`` is slot ``(oldest + j) % buffer_size`` and the ``(_n_adds - n_stored + j)``-th
+            transition ever added.
+        """
+        n_stored = self.buffer_size if self.full else self.pos
+        oldest = self.pos if self.full else 0
+        first = 1 if self.optimize_memory_usage and self.full else 0
+        return oldest, n_stored, first
+
+    def holds_transition(self, added_at: np.ndarray) -> np.ndarray:
+        """Whether the transitions added as the ``added_at``-th (absolute add indices) are still stored and usable."""
+        kept = self.buffer_size - (1 if self.optimize_memory_usage else 0)
+        return self._n_adds - added_at <= kept
+
+    def lambda_inputs(self, slots: np.ndarray, envs: np.ndarray, env: VecNormalize | None = None) -> dict[str, Any]:
+        """
+        What the lambda-return recursion needs of the transitions at ``(slots, envs)``, as NumPy arrays.
+
+        :return: ``rewards`` (float32, normalised as ``sample()`` normalises them), ``next_actions`` (-1: the episode
+            did not go on from this transition: it ended, was cut by a reset, or this is its newest transition),
+            ``terminated`` (ended by termination, not by a time limit), ``running_newest`` (the newest transition of an
+            episode still running), ``next_observations`` (normalised as ``sample()`` normalises them)
+        """
+        if self.optimize_memory_usage:
+            next_obs = self.observations[(slots + 1) % self.buffer_size, envs]
+        elif isinstance(self.next_observations, dict):
+            next_obs = {key: value[slots, envs] for key, value in self.next_observations.items()}
+        else:
+            next_obs = self.next_observations[slots, envs]
+        dones = self.dones[slots, envs]  # type: ignore[attr-defined]
+        timeouts = self.timeouts[slots, envs]  # type: ignore[attr-defined]
+        newest_slot = (self.pos - 1) % self.buffer_size
+        running = self.episode_starts < self._n_adds
+        return {
+            "rewards": self._normalize_reward(self.rewards[slots, envs], env),  # type: ignore[attr-defined]
+            "next_actions": self.next_actions[slots, envs],
+            "terminated": (dones * (1 - timeouts)) > 0,
+            "running_newest": (slots == newest_slot) & running[envs],
+            "next_observations": self._normalize_obs(next_obs, env),  # type: ignore[attr-defined]
+        }
+
+    def observations_and_actions(
+        self, slots: np.ndarray, envs: np.ndarray, env: VecNormalize | None = None
+    ) -> tuple[np.ndarray | dict[str, np.ndarray], np.ndarray]:
+        """The observations (normalised as ``sample()`` normalises them) and actions at ``(slots, envs)``, as NumPy arrays."""
+        if isinstance(self.observations, dict):
+            observations: Any = {key: value[slots, envs] for key, value in self.observations.items()}
+        else:
+            observations = self.observations[slots, envs]
+        return self._normalize_obs(observations, env), self.actions[slots, envs]  # type: ignore[attr-defined]
+
     def _sarsa_next_actions(self, batch_inds: np.ndarray, env_indices: np.ndarray) -> np.ndarray:
         """The action taken at the state that each sample's TD target bootstraps from (-1 where unknown)."""
         n_steps = getattr(self, "n_steps", 1)

@@ -8,7 +8,7 @@ import torch as th
 from gymnasium import spaces
 from stable_baselines3.common.buffers import ReplayBuffer
 from stable_baselines3.common.policies import BasePolicy
-from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
+from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule, TrainFrequencyUnit
 from stable_baselines3.common.utils import LinearSchedule, obs_as_tensor
 from stable_baselines3.dqn import DQN
 from stable_baselines3.dqn.policies import DQNPolicy
@@ -22,11 +22,12 @@ from sb3_offon.common.buffers import (
     OffOnReplayBufferSamples,
     reward_scale,
 )
+from sb3_offon.offon_dqn.lambda_returns import LambdaReturnCache, compute_lambda_returns
 from sb3_offon.offon_dqn.policies import CnnPolicy, MlpPolicy, MultiInputPolicy
 
 SelfOffOnDQN = TypeVar("SelfOffOnDQN", bound="OffOnDQN")
 
-MC_MIXING_OPTIONS = ("sample", "convex", "max")
+MC_MIXING_OPTIONS = ("sample", "convex", "max", "lambda")
 SARSA_TARGET_OPTIONS = ("sampled", "expected")
 MC_TRUNCATION_OPTIONS = ("bootstrap", "terminal", "drop")
 LOSS_FUNCTIONS = {"huber": F.smooth_l1_loss, "mse": F.mse_loss}
@@ -44,6 +45,8 @@ OFFON_PARAMETERS = (
     "sarsa_target",
     "mc_truncation",
     "loss",
+    "lambda_block_size",
+    "lambda_refresh_interval",
 )
 
 
@@ -190,6 +193,8 @@ class OffOnDQN(DQN):
         sarsa_target: str = "sampled",
         mc_truncation: str = "bootstrap",
         loss: str = "huber",
+        lambda_block_size: int = 100,
+        lambda_refresh_interval: int | None = None,
         stats_window_size: int = 100,
         tensorboard_log: str | None = None,
         policy_kwargs: dict[str, Any] | None = None,
@@ -238,6 +243,8 @@ class OffOnDQN(DQN):
         self.sarsa_target = sarsa_target
         self.mc_truncation = mc_truncation
         self.loss = loss
+        self.lambda_block_size = lambda_block_size
+        self.lambda_refresh_interval = lambda_refresh_interval
         # The Off-On arguments are checked by _setup_model (which load() also runs); the buffer's discounting here, on
         # the caller's arguments only
         self._check_buffer_discounting()
@@ -270,6 +277,17 @@ class OffOnDQN(DQN):
             # isinstance first: an array or other object would make ``in`` ambiguous or raise something else
             if not isinstance(value, str) or value not in options:
                 raise ValueError(f"`{name}` must be one of {options}, got {value!r}")
+        for name, allow_none in (("lambda_block_size", False), ("lambda_refresh_interval", True)):
+            value = getattr(self, name)
+            if allow_none and value is None:
+                continue
+            if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral) or value < 1:
+                raise ValueError(f"`{name}` must be a positive integer{' or None' if allow_none else ''}, got {value!r}")
+        if self.mc_mixing == "lambda" and self.n_steps > 1:
+            raise ValueError(
+                f"`n_steps` > 1 ({self.n_steps}) cannot be combined with `mc_mixing='lambda'`: lambda-returns already "
+                "blend the returns of every horizon (set n_steps=1)"
+            )
 
     def _setup_model(self) -> None:
         self._check_offon_arguments()
@@ -297,6 +315,8 @@ class OffOnDQN(DQN):
             self.qlearning_initial_prob, self.qlearning_final_prob, self.qlearning_fraction
         )
         self._connect_replay_buffer()
+        # Never pickled (see _excluded_save_params): a loaded model computes its lambda-returns afresh
+        self._lambda_cache: LambdaReturnCache | None = None
 
     def _default_replay_buffer_class(self) -> type[ReplayBuffer]:
         """The Off-On buffer for the observation space and ``n_steps`` (as SB3's DQN picks among its own)."""
@@ -350,6 +370,7 @@ class OffOnDQN(DQN):
             model's current env episodes (a buffer saved by this same live model, with no env reset in between).
         """
         super().load_replay_buffer(path, truncate_last_traj)
+        self._lambda_cache = None  # its slots were of the buffer it replaces
         self._connect_replay_buffer()
         if truncate_last_traj and isinstance(self.replay_buffer, OffOnBufferMixin):
             self.replay_buffer.end_open_episodes()
@@ -389,6 +410,7 @@ class OffOnDQN(DQN):
         if env_resets and isinstance(self.replay_buffer, OffOnBufferMixin):
             # Episodes still running in the buffer were cut off by this reset
             self.replay_buffer.end_open_episodes()
+            self._lambda_cache = None  # their last transitions' returns are no longer those of running episodes
         return result
 
     def train(self, gradient_steps: int, batch_size: int = 100) -> None:
@@ -408,6 +430,9 @@ class OffOnDQN(DQN):
         self.logger.record("train/qlearning_prob", self.qlearning_prob)
         if not isinstance(self.replay_buffer, OffOnBufferMixin):
             super().train(gradient_steps, batch_size)
+            return
+        if self.mc_mixing == "lambda":
+            self._train_on_lambda_returns(gradient_steps, batch_size)
             return
 
         self.policy.set_training_mode(True)
@@ -466,6 +491,122 @@ class OffOnDQN(DQN):
         self._record_target_statistics(
             th.stack(losses), th.cat(q_taken), th.cat(mc_returns), n_mc_targets, n_sarsa_targets, bound_active
         )
+
+    def _train_on_lambda_returns(self, gradient_steps: int, batch_size: int) -> None:
+        """
+        ``gradient_steps`` updates of the Q-network towards the cached lambda-returns of ``mc_mixing="lambda"``.
+
+        The minibatches are drawn from the cache (refreshed first if the target network changed), gathered and uploaded
+        in chunks as in :meth:`train`; no target network runs here: the refresh ran it once for the whole cache.
+        """
+        assert isinstance(self.replay_buffer, OffOnBufferMixin)
+        self.policy.set_training_mode(True)
+        self._update_learning_rate(self.policy.optimizer)
+        loss_fn = LOSS_FUNCTIONS[self.loss]
+        n_samples = gradient_steps * batch_size
+        cache = self._refreshed_lambda_cache(n_samples)
+        entries = cache.draw(n_samples, self.replay_buffer)
+        if entries is None:  # everything cached was overwritten since the refresh: compute afresh
+            self._lambda_cache = None
+            cache = self._refreshed_lambda_cache(n_samples)
+            entries = cache.draw(n_samples, self.replay_buffer)
+            assert entries is not None
+        parameters = list(self.policy.parameters())
+        losses = []
+        steps_per_chunk = self._steps_per_chunk(batch_size)
+        for first_step in range(0, gradient_steps, steps_per_chunk):
+            n_steps = min(steps_per_chunk, gradient_steps - first_step)
+            chunk = entries[first_step * batch_size : (first_step + n_steps) * batch_size]
+            observations, actions = self.replay_buffer.observations_and_actions(
+                cache.slots[chunk], cache.envs[chunk], self._vec_normalize_env
+            )
+            observations_tensor = obs_as_tensor(observations, self.device)
+            actions_tensor = self._to_device(actions).long()
+            targets = self._to_device(cache.returns[chunk].reshape(-1, 1))
+            for step in range(n_steps):
+                rows = slice(step * batch_size, (step + 1) * batch_size)
+                current_q_values = self.q_net(_rows(observations_tensor, rows))
+                current_q_values = th.gather(current_q_values, dim=1, index=actions_tensor[rows])
+                loss = loss_fn(current_q_values, targets[rows])
+
+                self.policy.optimizer.zero_grad()
+                loss.backward()
+                th.nn.utils.clip_grad_norm_(parameters, self.max_grad_norm)
+                self.policy.optimizer.step()
+                losses.append(loss.detach())
+
+        self._n_updates += gradient_steps
+        self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
+        self.logger.record("train/loss", th.stack(losses).mean().item())
+        self.logger.record("train/lambda", cache.lam)
+        self.logger.record("train/trace_cut_fraction", cache.trace_cut_fraction)
+
+    def _lambda_refresh_key(self) -> int:
+        """
+        Changes exactly when the cached lambda-returns are due: at each target network update (SB3's ``_on_step``
+        updates it every ``target_update_interval // n_envs`` calls), or every ``lambda_refresh_interval`` env steps.
+        """
+        if self.lambda_refresh_interval is not None:
+            return self.num_timesteps // self.lambda_refresh_interval
+        return self._n_calls // max(self.target_update_interval // self.n_envs, 1)
+
+    def _refreshed_lambda_cache(self, n_samples: int) -> LambdaReturnCache:
+        """The cached lambda-returns, computed afresh if there are none yet or the refresh key changed."""
+        key = self._lambda_refresh_key()
+        if self._lambda_cache is not None and self._lambda_cache.key == key:
+            return self._lambda_cache
+        assert isinstance(self.replay_buffer, OffOnBufferMixin)
+        self._lambda_cache = compute_lambda_returns(
+            self.replay_buffer,
+            self._target_values_and_actions,
+            n_wanted=max(n_samples, self._lambda_samples_per_refresh()),
+            block_size=self.lambda_block_size,
+            gamma=self.gamma,
+            lam=self.mc_prob,
+            qlearning_prob=self.qlearning_prob,
+            cut_is_terminal=self.mc_truncation == "terminal",
+            key=key,
+            env=self._vec_normalize_env,
+        )
+        return self._lambda_cache
+
+    def _lambda_samples_per_refresh(self) -> int:
+        """
+        How many transitions will be trained on from one refresh to the next (with ``train_freq`` in steps; in
+        episodes, this is unknown and one training call's count is used): each refresh computes about as many
+        lambda-returns, so that each is used about once.
+        """
+        if self.train_freq.unit != TrainFrequencyUnit.STEP:  # type: ignore[union-attr]
+            return 0
+        steps_per_call = self.train_freq.frequency * self.n_envs  # type: ignore[union-attr]
+        if self.lambda_refresh_interval is not None:
+            steps_per_refresh = self.lambda_refresh_interval
+        else:
+            steps_per_refresh = max(self.target_update_interval // self.n_envs, 1) * self.n_envs
+        calls_per_refresh = max(1, math.ceil(steps_per_refresh / steps_per_call))
+        gradient_steps = self.gradient_steps if self.gradient_steps >= 0 else steps_per_call
+        return calls_per_refresh * gradient_steps * self.batch_size
+
+    def _target_values_and_actions(self, observations: np.ndarray | dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        """
+        max_a Q_target(s, a) and its argmax for a batch of (normalised) observations in the buffer's layout, in chunks
+        of at most ``MAX_CHUNK_BYTES`` of float observations, read back to the host once.
+        """
+        first = next(iter(observations.values())) if isinstance(observations, dict) else observations
+        n_observations = len(first)
+        rows_per_chunk = self._steps_per_chunk(1) * 2  # _steps_per_chunk counts observations and next observations
+        values, actions = [], []
+        with th.no_grad():
+            for start in range(0, n_observations, rows_per_chunk):
+                rows = slice(start, start + rows_per_chunk)
+                chunk_values, chunk_actions = self.q_net_target(obs_as_tensor(_rows(observations, rows), self.device)).max(dim=1)
+                values.append(chunk_values)
+                actions.append(chunk_actions)
+        if not values:
+            return np.zeros(0, dtype=np.float32), np.zeros(0, dtype=np.int64)
+        # One read-back for both (an action index is exact in float32 up to 2**24 actions)
+        both = th.stack([th.cat(values), th.cat(actions).to(values[0].dtype)]).cpu().numpy()
+        return both[0], both[1].astype(np.int64)
 
     def _steps_per_chunk(self, batch_size: int) -> int:
         """
@@ -621,7 +762,7 @@ class OffOnDQN(DQN):
 
     def _excluded_save_params(self) -> list[str]:
         # The schedules are rebuilt from their parameters in _setup_model
-        return [*super()._excluded_save_params(), "mc_schedule", "qlearning_schedule"]
+        return [*super()._excluded_save_params(), "mc_schedule", "qlearning_schedule", "_lambda_cache"]
 
 
 def _rows(value: Any, rows: slice) -> Any:

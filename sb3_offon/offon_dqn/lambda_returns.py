@@ -1,0 +1,213 @@
+"""
+The lambda-returns of OffOnDQN's ``mc_mixing="lambda"``: computed backwards over blocks of replayed transitions with
+one batched pass of the target network, and cached until the target network changes (DQN(lambda), Daley & Amato 2019).
+
+For a transition t (``gamma`` the discount, ``lam`` = delta1, ``delta2`` the trace-cut weight):
+
+- G_t = r_t where t terminated its episode;
+- G_t = r_t + gamma * V(s_{t+1}) where t was cut (a time limit, a reset) or is the newest transition of an episode still
+  running, or of its block;
+- otherwise G_t = r_t + gamma * [(1 - lam * c_{t+1}) * V(s_{t+1}) + lam * c_{t+1} * G_{t+1}], where c_{t+1} = 1 if
+  a_{t+1} = argmax_a Q_target(s_{t+1}, a), and 1 - delta2 otherwise;
+
+with V(s) = max_a Q_target(s, a). Each G_t is x_t + a_t * G_{t+1} with x_t and a_t known once V is: a linear recurrence,
+run backwards for all blocks at once by :func:`backward_recurrence`.
+"""
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from sb3_offon.common.buffers import OffOnBufferMixin
+
+# Maps a batch of next observations (normalised, in the buffer's layout) to (max_a Q_target(s', a), argmax_a) as NumPy
+TargetValueFn = Callable[[Any], tuple[np.ndarray, np.ndarray]]
+
+
+def backward_recurrence(inputs: np.ndarray, coefficients: np.ndarray) -> np.ndarray:
+    """
+    y_t = x_t + a_t * y_{t+1} along the last axis, with y = 0 past the end, for every row at once.
+
+    The coefficients vary from step to step (with Peng's and intermediate trace cuts, a_t takes any value in
+    [0, gamma * lam]), so a constant-coefficient filter (``scipy.signal.lfilter``) does not apply. Each step is the
+    affine map z -> x_t + a_t * z, and maps compose associatively: doubling the span of the composed maps ceil(log2(T))
+    times (a Hillis-Steele scan) gives every y_t in O(T log T) vectorised operations, with no Python loop over steps.
+    A coefficient of 0 (an episode's end, a cut trace) starts a new segment.
+
+    :param inputs: x, shaped (..., T)
+    :param coefficients: a, the same shape
+    :return: y as float64, the same shape
+    """
+    values = np.array(inputs, dtype=np.float64)
+    spans = np.array(coefficients, dtype=np.float64)
+    length = values.shape[-1]
+    shift = 1
+    while shift < length:
+        # After this round, values[t] = x_t + ... over 2 * shift steps and spans[t] the product of their coefficients
+        values[..., :-shift] += spans[..., :-shift] * values[..., shift:]
+        spans[..., :-shift] *= spans[..., shift:]
+        spans[..., length - shift :] = 0.0  # nothing lies past the end
+        shift *= 2
+    return values
+
+
+@dataclass
+class LambdaReturnCache:
+    """
+    The lambda-returns of a set of stored transitions, computed with one target network and one (lam, delta2).
+
+    :param slots: the transitions' slots in the replay buffer
+    :param envs: their env columns
+    :param added_at: their absolute add indices (to tell a slot overwritten since)
+    :param returns: their lambda-returns, float32, in the units of the rewards the networks learn from
+    :param key: what identifies the target network they were computed with (OffOnDQN's refresh key)
+    :param lam: lambda (delta1) of the refresh
+    :param qlearning_prob: delta2 of the refresh
+    :param trace_cut_fraction: the share of the continuations whose trace weight c_{t+1} was below 1
+    """
+
+    slots: np.ndarray
+    envs: np.ndarray
+    added_at: np.ndarray
+    returns: np.ndarray
+    key: int
+    lam: float
+    qlearning_prob: float
+    trace_cut_fraction: float
+    order: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    cursor: int = 0
+
+    def __len__(self) -> int:
+        return len(self.returns)
+
+    def draw(self, n_samples: int, buffer: OffOnBufferMixin) -> np.ndarray | None:
+        """
+        ``n_samples`` entries, without replacement while the cache lasts (in a random order drawn from NumPy's global
+        RNG, as SB3 samples), skipping transitions the buffer has overwritten since the refresh.
+
+        :return: entry indices, or None when too few of the cached transitions are still stored (refresh then)
+        """
+        live = buffer.holds_transition(self.added_at)
+        n_live = int(np.count_nonzero(live))
+        if n_live == 0:
+            return None
+        drawn: list[np.ndarray] = []
+        n_drawn = 0
+        while n_drawn < n_samples:
+            if self.cursor >= len(self.order):
+                # A new pass over the live entries, in a new random order
+                self.order = np.flatnonzero(live)[np.random.permutation(n_live)]
+                self.cursor = 0
+            taken = self.order[self.cursor : self.cursor + n_samples - n_drawn]
+            self.cursor += len(taken)
+            taken = taken[live[taken]]  # entries of the current pass may have been overwritten since it began
+            drawn.append(taken)
+            n_drawn += len(taken)
+        return np.concatenate(drawn)
+
+
+def choose_blocks(
+    n_envs: int, first: int, n_stored: int, block_size: int, n_wanted: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """
+    Blocks of consecutive stored transitions (in chronological indices) that hold about ``n_wanted`` transitions.
+
+    Each env column's valid range ``[first, n_stored)`` is cut into blocks of ``block_size`` on a grid with a random
+    offset (so block ends move from one refresh to the next); blocks are then picked at random without replacement until
+    they hold ``n_wanted`` transitions, so a transition is in the cache at most once, and uniformly at random in blocks.
+    When they would hold the whole buffer anyway, each env column is one block: no trace is cut at a block's end.
+
+    :return: per block, its env column, first chronological index and length
+    """
+    n_valid = n_stored - first
+    if n_valid <= 0:
+        empty = np.zeros(0, dtype=np.int64)
+        return empty, empty, empty
+    if n_wanted >= n_envs * n_valid:
+        return np.arange(n_envs), np.full(n_envs, first), np.full(n_envs, n_valid)
+    offset = np.random.randint(block_size)
+    cuts = np.arange(first + offset, n_stored, block_size)
+    bounds = np.unique(np.concatenate(([first], cuts, [n_stored])))
+    column_starts, column_lengths = bounds[:-1], np.diff(bounds)
+    n_column_blocks = len(column_starts)
+    picked = np.random.permutation(n_envs * n_column_blocks)
+    lengths = column_lengths[picked % n_column_blocks]
+    n_picked = int(np.searchsorted(np.cumsum(lengths), n_wanted)) + 1
+    picked = picked[:n_picked]
+    return picked // n_column_blocks, column_starts[picked % n_column_blocks], lengths[:n_picked]
+
+
+def compute_lambda_returns(
+    buffer: OffOnBufferMixin,
+    target_values: TargetValueFn,
+    n_wanted: int,
+    block_size: int,
+    gamma: float,
+    lam: float,
+    qlearning_prob: float,
+    cut_is_terminal: bool,
+    key: int,
+    env: Any = None,
+) -> LambdaReturnCache:
+    """
+    The lambda-returns of about ``n_wanted`` stored transitions (see the module's docstring), in blocks.
+
+    :param buffer: the Off-On replay buffer
+    :param target_values: V and the greedy actions of the target network, for a batch of next observations
+    :param n_wanted: how many transitions to cover (the whole buffer, in one block per env, if it holds no more)
+    :param block_size: the length of a block: the trace of a block's last transition is cut there (bootstrapped)
+    :param gamma: the discount factor
+    :param lam: lambda (delta1)
+    :param qlearning_prob: delta2: the trace weight after a non-greedy action is 1 - delta2
+    :param cut_is_terminal: ``mc_truncation="terminal"``: an episode cut by a time limit or a reset has no value after
+        its last step (the newest transition of a running episode, and a block's last, still bootstrap)
+    :param key: the refresh key to store
+    :param env: the VecNormalize wrapper, if any, to normalise observations and rewards with
+    """
+    oldest, n_stored, first = buffer.chronology()
+    block_envs, block_starts, block_lengths = choose_blocks(buffer.n_envs, first, n_stored, block_size, n_wanted)
+    width = int(block_lengths.max()) if len(block_lengths) else 0
+    steps = np.arange(width)
+    valid = steps < block_lengths[:, None]
+    chronological = block_starts[:, None] + steps
+    slots = ((oldest + chronological) % buffer.buffer_size)[valid]
+    envs = np.broadcast_to(block_envs[:, None], valid.shape)[valid]
+
+    inputs = buffer.lambda_inputs(slots, envs, env)
+    next_values, greedy_actions = target_values(inputs["next_observations"])
+    next_actions = inputs["next_actions"].reshape(-1)
+
+    # In the blocks' padded layout: a transition's trace goes on to the next one if its episode did and the next one is
+    # in the block
+    goes_on = np.zeros(valid.shape, dtype=bool)
+    goes_on[valid] = next_actions >= 0
+    goes_on[:, :-1] &= valid[:, 1:]
+    goes_on[:, -1] = False
+    trace = np.ones(valid.shape)  # c_{t+1}
+    trace[valid] = np.where(greedy_actions == next_actions, 1.0, 1.0 - qlearning_prob)
+    no_value_after = inputs["terminated"]
+    if cut_is_terminal:
+        no_value_after = no_value_after | ((next_actions < 0) & ~inputs["running_newest"])
+    tail = np.where(no_value_after, 0.0, next_values)  # the value after a transition whose trace stops there
+
+    padded_values, padded_tail, rewards = np.zeros(valid.shape), np.zeros(valid.shape), np.zeros(valid.shape)
+    padded_values[valid], padded_tail[valid], rewards[valid] = next_values, tail, inputs["rewards"]
+    bootstrap = np.where(goes_on, (1.0 - lam * trace) * padded_values, padded_tail)
+    returns = backward_recurrence(rewards + gamma * bootstrap, np.where(goes_on, gamma * lam * trace, 0.0))
+
+    n_goes_on = int(np.count_nonzero(goes_on))
+    trace_cut_fraction = float(np.count_nonzero(goes_on & (trace < 1.0))) / n_goes_on if n_goes_on else 0.0
+    added_at = buffer._n_adds - n_stored + chronological[valid]
+    return LambdaReturnCache(
+        slots=slots,
+        envs=envs,
+        added_at=added_at,
+        returns=returns[valid].astype(np.float32),
+        key=key,
+        lam=lam,
+        qlearning_prob=qlearning_prob,
+        trace_cut_fraction=trace_cut_fraction,
+    )
+
