@@ -67,8 +67,10 @@ def reference_lambda_returns(buffer, target, gamma, lam, qlearning_prob, cut_is_
         for index in reversed(range(first, n_stored)):
             slot = (oldest + index) % buffer.buffer_size
             reward = float(buffer.rewards[slot, env])
-            next_obs = buffer.observations[(slot + 1) % buffer.buffer_size, env] if buffer.optimize_memory_usage else (
-                buffer.next_observations[slot, env]
+            next_obs = (
+                buffer.observations[(slot + 1) % buffer.buffer_size, env]
+                if buffer.optimize_memory_usage
+                else (buffer.next_observations[slot, env])
             )
             value, greedy = (float(x[0]) for x in target(next_obs[None]))
             next_action = int(buffer.next_actions[slot, env])
@@ -192,7 +194,8 @@ def random_episodes(buffer, n_adds, seed=0):
     for _ in range(n_adds):
         dones = rng.uniform(size=n_envs) < 0.2
         truncated = dones & (rng.uniform(size=n_envs) < 0.4)
-        step(buffer, rng.normal(size=n_envs), rng.integers(0, N_ACTIONS, n_envs), rng.integers(0, 50, n_envs), dones, truncated)
+        actions, next_obs_ids = rng.integers(0, N_ACTIONS, n_envs), rng.integers(0, 50, n_envs)
+        step(buffer, rng.normal(size=n_envs), actions, next_obs_ids, dones, truncated)
 
 
 @pytest.mark.parametrize("n_adds", [9, 40], ids=["partly-filled", "wrapped"])
@@ -224,9 +227,11 @@ def test_blocks_cut_the_trace_at_their_end_and_hold_each_transition_once():
     # Each block's last transition is where its trace is cut: the newest of each run of consecutive cached slots
     oldest, _, _ = buffer.chronology()
     chronological = (cache.slots - oldest) % buffer.buffer_size
-    block_ends = {(int(j), int(e)) for j, e in zip(chronological, cache.envs, strict=True) if (int(j) + 1, int(e)) not in {
-        (int(k), int(f)) for k, f in zip(chronological, cache.envs, strict=True)
-    }}
+    block_ends = {
+        (int(j), int(e))
+        for j, e in zip(chronological, cache.envs, strict=True)
+        if (int(j) + 1, int(e)) not in {(int(k), int(f)) for k, f in zip(chronological, cache.envs, strict=True)}
+    }
     reference = reference_lambda_returns(buffer, fake_target, GAMMA, 0.8, 1.0, block_ends=block_ends)
     for slot, env, value in zip(cache.slots, cache.envs, cache.returns, strict=True):
         assert value == pytest.approx(reference[(int(slot), int(env))], rel=1e-6, abs=1e-6)
@@ -329,8 +334,17 @@ def test_refresh_interval_in_env_steps():
 
 def test_cache_size_follows_the_samples_trained_until_the_next_refresh():
     model = OffOnDQN(
-        "MlpPolicy", "CartPole-v1", seed=0, buffer_size=10_000, learning_starts=100, batch_size=8, train_freq=4,
-        gradient_steps=2, target_update_interval=40, policy_kwargs=dict(net_arch=[16]), **LAMBDA
+        "MlpPolicy",
+        "CartPole-v1",
+        seed=0,
+        buffer_size=10_000,
+        learning_starts=100,
+        batch_size=8,
+        train_freq=4,
+        gradient_steps=2,
+        target_update_interval=40,
+        policy_kwargs=dict(net_arch=[16]),
+        **LAMBDA,
     )
     assert model._lambda_samples_per_refresh() == 10 * 2 * 8  # 10 calls of 2 steps of 8 samples per target update
     model.learn(300)
@@ -356,12 +370,13 @@ def test_lambda_and_trace_cuts_are_logged():
 
 
 def test_n_steps_cannot_be_combined_with_lambda():
-    with pytest.raises(ValueError, match="n_steps.*mc_mixing='lambda'"):
+    with pytest.raises(ValueError, match=r"n_steps.*mc_mixing='lambda'"):
         OffOnDQN("MlpPolicy", "CartPole-v1", n_steps=3, **LAMBDA)
 
 
 @pytest.mark.parametrize(
-    "name, value", [("lambda_block_size", 0), ("lambda_block_size", 2.5), ("lambda_refresh_interval", 0), ("lambda_block_size", True)]
+    "name, value",
+    [("lambda_block_size", 0), ("lambda_block_size", 2.5), ("lambda_refresh_interval", 0), ("lambda_block_size", True)],
 )
 def test_bad_lambda_arguments_name_the_parameter(name, value):
     with pytest.raises(ValueError, match=name):
@@ -389,8 +404,15 @@ def test_dict_observations_and_vecnormalize():
     assert model._lambda_cache is not None and np.isfinite(model._lambda_cache.returns).all()
 
     env = VecNormalize(make_vec_env("CartPole-v1", n_envs=2, seed=0), gamma=0.9)
-    model = OffOnDQN("MlpPolicy", env, seed=0, buffer_size=300, gamma=0.9, **SMALL, **{**LAMBDA, "mc_initial_prob": 0.0,
-                     "mc_final_prob": 0.0})
+    model = OffOnDQN(
+        "MlpPolicy",
+        env,
+        seed=0,
+        buffer_size=300,
+        gamma=0.9,
+        **SMALL,
+        **{**LAMBDA, "mc_initial_prob": 0.0, "mc_final_prob": 0.0},
+    )
     model.learn(200)
     # lambda = 0: the one-step target of SB3's normalised samples, r + gamma * (1 - d) * max_a Q_target(s', a)
     cache = model._refreshed_lambda_cache(10**6)

@@ -210,4 +210,3 @@ def compute_lambda_returns(
         qlearning_prob=qlearning_prob,
         trace_cut_fraction=trace_cut_fraction,
     )
-

@@ -599,7 +599,8 @@ class OffOnDQN(DQN):
         with th.no_grad():
             for start in range(0, n_observations, rows_per_chunk):
                 rows = slice(start, start + rows_per_chunk)
-                chunk_values, chunk_actions = self.q_net_target(obs_as_tensor(_rows(observations, rows), self.device)).max(dim=1)
+                q_values = self.q_net_target(obs_as_tensor(_rows(observations, rows), self.device))
+                chunk_values, chunk_actions = q_values.max(dim=1)
                 values.append(chunk_values)
                 actions.append(chunk_actions)
         if not values:
