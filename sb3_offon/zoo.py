@@ -40,13 +40,15 @@ HYPERPARAMS_DIR = Path(__file__).resolve().parent / "hyperparams"
 # The names are the contract of the command line and of the log folders (logs/{algo}/...). ``dqn_nstep`` is SB3's own
 # DQN under a name of its own, so that its settings (the zoo's DQN entries plus ``n_steps``) and its logs are apart
 # from plain DQN's. The zoo already registers ``dqn`` and ``qrdqn`` (sb3-contrib); this package bundles their settings.
-# ``offon_choice`` is OffOnDQN with the target settings that issue 13's search chose, all of them in its YAML file.
+# ``offon_choice`` is OffOnDQN with the target settings that issue 13's search chose, all of them in its YAML file;
+# ``offon_lambda`` is OffOnDQN with mc_mixing="lambda" (lambda-returns), its settings in its YAML file too.
 ALGOS: dict[str, type[BaseAlgorithm]] = {
     "offon_dqn": OffOnDQN,
     "dqn_mc": DQNMC,
     "dqn_sarsa": DQNSarsa,
     "dqn_nstep": DQN,
     "offon_choice": OffOnDQN,
+    "offon_lambda": OffOnDQN,
 }
 
 
@@ -96,37 +98,55 @@ class OffOnExperimentManager(ExperimentManager):
         super().__init__(*bound.args[1:], **bound.kwargs)
 
 
-def _sample_mc_params(trial: optuna.Trial) -> dict[str, Any]:
-    """delta1, the probability of the Monte-Carlo target, as a decaying schedule (the paper's shape), and the MC options."""
-    return {
+def _sample_mc_params(trial: optuna.Trial, lambda_returns: bool = False) -> dict[str, Any]:
+    """
+    delta1, the probability of the Monte-Carlo target, as a decaying schedule (the paper's shape), and the MC options.
+    With ``lambda_returns``, delta1 is lambda and ``mc_mixing`` stays ``"lambda"`` (the YAML's); otherwise it is one of
+    the coin-flip modes (the search space of the paper's variants, as it was before the lambda mode existed).
+    """
+    sampled = {
         "mc_initial_prob": trial.suggest_float("mc_initial_prob", 0.5, 1.0),
         "mc_final_prob": trial.suggest_float("mc_final_prob", 0.0, 0.5),
         "mc_fraction": trial.suggest_float("mc_fraction", 0.1, 1.0),
-        "mc_mixing": trial.suggest_categorical("mc_mixing", list(MC_MIXING_OPTIONS)),
         "mc_truncation": trial.suggest_categorical("mc_truncation", list(MC_TRUNCATION_OPTIONS)),
     }
+    if not lambda_returns:
+        coin_flips = [mode for mode in MC_MIXING_OPTIONS if mode != "lambda"]
+        sampled["mc_mixing"] = trial.suggest_categorical("mc_mixing", coin_flips)
+    return sampled
 
 
-def _sample_qlearning_params(trial: optuna.Trial) -> dict[str, Any]:
-    """delta2, the probability of Q-learning given a TD target, as a decaying schedule, and the Sarsa option."""
-    return {
+def _sample_qlearning_params(trial: optuna.Trial, sarsa_target: bool = True) -> dict[str, Any]:
+    """
+    delta2, the probability of Q-learning given a TD target, as a decaying schedule, and the Sarsa option (not with
+    lambda-returns, where delta2 weighs the trace after a non-greedy action and no Sarsa target is made).
+    """
+    sampled = {
         "qlearning_initial_prob": trial.suggest_float("qlearning_initial_prob", 0.5, 1.0),
         "qlearning_final_prob": trial.suggest_float("qlearning_final_prob", 0.0, 0.5),
         "qlearning_fraction": trial.suggest_float("qlearning_fraction", 0.1, 1.0),
-        "sarsa_target": trial.suggest_categorical("sarsa_target", list(SARSA_TARGET_OPTIONS)),
     }
+    if sarsa_target:
+        sampled["sarsa_target"] = trial.suggest_categorical("sarsa_target", list(SARSA_TARGET_OPTIONS))
+    return sampled
 
 
 def _sample_offon_params(
-    trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict, mc: bool, sarsa: bool
+    trial: optuna.Trial,
+    n_actions: int,
+    n_envs: int,
+    additional_args: dict,
+    mc: bool,
+    sarsa: bool,
+    lambda_returns: bool = False,
 ) -> dict[str, Any]:
     # DQN's own parameters exactly as the zoo samples them for ``dqn``, so that tuning budgets compare
     hyperparams = sample_dqn_params(trial, n_actions, n_envs, additional_args)
     # Parameters a variant fixes are not sampled: they would only dilute the search
     if mc:
-        hyperparams.update(_sample_mc_params(trial))
+        hyperparams.update(_sample_mc_params(trial, lambda_returns))
     if sarsa:
-        hyperparams.update(_sample_qlearning_params(trial))
+        hyperparams.update(_sample_qlearning_params(trial, sarsa_target=not lambda_returns))
     hyperparams["loss"] = trial.suggest_categorical("loss", list(LOSS_FUNCTIONS))
     return hyperparams
 
@@ -172,6 +192,20 @@ def sample_dqn_sarsa_params(trial: optuna.Trial, n_actions: int, n_envs: int, ad
     return _sample_offon_params(trial, n_actions, n_envs, additional_args, mc=False, sarsa=True)
 
 
+def sample_offon_lambda_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
+    """
+    Sampler for OffOnDQN with ``mc_mixing="lambda"`` (``offon_lambda``): the zoo's DQN parameters and the lambda
+    (delta1) and delta2 schedules, sampled as for :func:`sample_offon_dqn_params`; ``mc_mixing`` stays the YAML's.
+
+    :param trial: the Optuna trial
+    :param n_actions: number of actions (unused by DQN, part of the zoo's sampler signature)
+    :param n_envs: number of training envs
+    :param additional_args: the zoo's extra arguments (``using_her_replay_buffer``, ``her_kwargs``)
+    :return: the keyword arguments of the algorithm
+    """
+    return _sample_offon_params(trial, n_actions, n_envs, additional_args, mc=True, sarsa=True, lambda_returns=True)
+
+
 def sample_dqn_nstep_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
     """
     Sampler for n-step DQN: the zoo's DQN parameters and ``n_steps`` among 3, 5 and 10.
@@ -194,6 +228,7 @@ SAMPLERS = {
     "dqn_sarsa": sample_dqn_sarsa_params,
     # The search's choice fixes delta2 at 1 (no Sarsa), as DQNMC does: the same parameters are worth sampling
     "offon_choice": sample_dqn_mc_params,
+    "offon_lambda": sample_offon_lambda_params,
 }
 
 

@@ -27,7 +27,9 @@ PAPER_CLASSES = {"offon_dqn": OffOnDQN, "dqn_mc": DQNMC, "dqn_sarsa": DQNSarsa, 
 BASELINE_CLASSES = {"dqn_nstep": DQN, "qrdqn": QRDQN}
 # The configuration the search of issue 13 chose: the four tasks and the search's stochastic one
 CHOICE_CLASSES = {"offon_choice": OffOnDQN}
-CLASSES = {**PAPER_CLASSES, **BASELINE_CLASSES, **CHOICE_CLASSES}
+# Issue 26: OffOnDQN with mc_mixing="lambda" on the same tasks
+LAMBDA_CLASSES = {"offon_lambda": OffOnDQN}
+CLASSES = {**PAPER_CLASSES, **BASELINE_CLASSES, **CHOICE_CLASSES, **LAMBDA_CLASSES}
 BASELINE_ENVS = {"default", "atari", "CartPole-v1", "MountainCar-v0", "LunarLander-v3", "Acrobot-v1"}
 CHOICE_ENVS = BASELINE_ENVS | {"FrozenLake-v1"}
 # The search's winner, `mc_sample` (results/search/README.md): the paper's delta1 schedule, no Sarsa, SB3's loss
@@ -127,6 +129,18 @@ def test_choice_is_the_search_winner_on_the_dqn_settings() -> None:
     dqn = load(HYPERPARAMS_DIR / "dqn.yml")
     for env_id, entry in load(HYPERPARAMS_DIR / "offon_choice.yml").items():
         assert {key: entry[key] for key in TARGET_KEYS & set(entry)} == CHOICE_TARGETS, env_id
+        assert {key: value for key, value in entry.items() if key not in TARGET_KEYS} == dqn[env_id], env_id
+
+
+def test_lambda_file_is_the_dqn_settings_with_lambda_targets() -> None:
+    """`offon_lambda`: every entry is the `dqn` one plus lambda-return targets (lambda 0.9, Watkins), and nothing else."""
+    dqn = load(HYPERPARAMS_DIR / "dqn.yml")
+    lambda_targets = {**CHOICE_TARGETS, "mc_initial_prob": 0.9, "mc_final_prob": 0.9, "mc_mixing": "lambda"}
+    lambda_targets.update(lambda_block_size=100, lambda_refresh_interval=None)
+    entries = load(HYPERPARAMS_DIR / "offon_lambda.yml")
+    assert set(entries) == CHOICE_ENVS
+    for env_id, entry in entries.items():
+        assert {key: entry[key] for key in TARGET_KEYS & set(entry)} == lambda_targets, env_id
         assert {key: value for key, value in entry.items() if key not in TARGET_KEYS} == dqn[env_id], env_id
 
 
@@ -232,6 +246,14 @@ def test_sampler(algo: str) -> None:
         if algo == "dqn_nstep":
             assert sampled["n_steps"] in (3, 5, 10)
             continue
+        if algo == "offon_lambda":
+            # lambda and delta2 schedules; mc_mixing stays the YAML's "lambda", and there is no Sarsa target to choose
+            assert {"mc_initial_prob", "qlearning_initial_prob", "mc_truncation", "loss"} <= set(sampled)
+            assert not {"mc_mixing", "sarsa_target"} & set(sampled)
+            model = ALGOS[algo]("MlpPolicy", "CartPole-v1", device="cpu", mc_mixing="lambda", **sampled)
+            study.tell(trial, 0.0)
+            continue
+        assert sampled.get("mc_mixing", "sample") != "lambda", "the coin-flip variants' search space is unchanged"
         assert "loss" in sampled
         has_mc = {"mc_initial_prob", "mc_final_prob", "mc_fraction", "mc_mixing", "mc_truncation"} <= set(sampled)
         has_sarsa = {"qlearning_initial_prob", "qlearning_final_prob", "qlearning_fraction", "sarsa_target"} <= set(sampled)
