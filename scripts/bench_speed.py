@@ -2,7 +2,9 @@
 Speed benchmark: environment steps per second of OffOnDQN against SB3's DQN at identical hyperparameters.
 
 Both algorithms get the same hyperparameter dict (rl-zoo's tuned DQN settings for the env) and the same seed;
-OffOnDQN keeps its constructor defaults for the Off-On parameters (the paper's delta schedules).
+OffOnDQN keeps its constructor defaults for the Off-On parameters (the paper's delta schedules), or with ``--mode
+lambda`` takes ``offon_lambda``'s target settings (``mc_mixing="lambda"``, lambda 0.9, Watkins's cuts). The baseline is
+SB3's DQN, or with ``--baseline dqn_nstep`` SB3's DQN with ``n_steps=10`` (n-step returns).
 
 The two runs of a pair take turns in one process: each learn() runs in a thread of its own, and they hand a baton
 to each other every ``--switch-every`` env steps (from a callback), so only one of them computes at any time. A
@@ -20,6 +22,7 @@ Usage:
     python scripts/bench_speed.py --env LunarLander-v3 --timesteps 20000 --repeats 3 --output results/speed/lunarlander.json
     python scripts/bench_speed.py --env CartPole-v1 --device cuda --output results/speed/cartpole_cuda.json
     python scripts/bench_speed.py --env AtariShaped --device cuda --timesteps 5000 --output results/speed/atari_cuda.json
+    python scripts/bench_speed.py --env LunarLander-v3 --mode lambda --baseline dqn_nstep --repeats 5
 
 ``--env AtariShaped`` is an Atari-shaped task made up on the spot (4 stacked 84x84 uint8 frames, episodes of 200 steps
 that end by termination, CnnPolicy, the zoo's Atari DQN settings with a smaller buffer), so that CNNs can be measured,
@@ -95,6 +98,13 @@ ZOO_HYPERPARAMS[ATARI_SHAPED] = dict(
     exploration_fraction=0.1,
     exploration_final_eps=0.01,
 )
+# --mode lambda: offon_lambda's target settings (sb3_offon/hyperparams/offon_lambda.yml)
+LAMBDA_TARGETS = dict(
+    mc_mixing="lambda", mc_initial_prob=0.9, mc_final_prob=0.9, qlearning_initial_prob=1.0, qlearning_final_prob=1.0
+)
+MODES = {"paper": {}, "lambda": LAMBDA_TARGETS}
+# --baseline dqn_nstep: SB3's n-step DQN as in the head-to-heads (hyperparams/dqn_nstep.yml uses n = 10 on every task)
+BASELINES = {"dqn": {}, "dqn_nstep": dict(n_steps=10)}
 ZOO_TIMESTEPS = {"CartPole-v1": 50_000, "LunarLander-v3": 100_000, ATARI_SHAPED: 10_000_000}
 POLICIES = {"CartPole-v1": "MlpPolicy", "LunarLander-v3": "MlpPolicy", ATARI_SHAPED: "CnnPolicy"}
 
@@ -146,6 +156,10 @@ def parse_args() -> argparse.Namespace:
         type=int,
         default=2000,
         help="untimed run of each algorithm before the timed ones (first-call costs of torch and numpy); 0: none",
+    )
+    parser.add_argument("--mode", choices=sorted(MODES), default="paper", help="OffOnDQN's targets (default: paper)")
+    parser.add_argument(
+        "--baseline", choices=sorted(BASELINES), default="dqn", help="SB3's DQN, or its n-step DQN (n = 10) (default: dqn)"
     )
     parser.add_argument("--output", type=str, default=None, help="optional JSON path (a markdown table is written next to it)")
     return parser.parse_args()
@@ -218,9 +232,12 @@ class TakeTurns(BaseCallback):
         return True
 
 
-def build(algo_class: type[DQN], env_id: str, hyperparams: dict, seed: int, device: str = "cpu") -> tuple[DQN, list[float]]:
-    """A model whose train() time is summed into the returned one-element list."""
-    model = algo_class(POLICIES[env_id], make_env(env_id), seed=seed, verbose=0, device=device, **hyperparams)
+def build(
+    algo_class: type[DQN], env_id: str, hyperparams: dict, seed: int, device: str = "cpu", extra: dict | None = None
+) -> tuple[DQN, list[float]]:
+    """A model whose train() time is summed into the returned one-element list (``extra``: its own arguments)."""
+    kwargs = {**hyperparams, **(extra or {})}
+    model = algo_class(POLICIES[env_id], make_env(env_id), seed=seed, verbose=0, device=device, **kwargs)
     train_seconds = [0.0]
     untimed_train = model.train
 
@@ -243,13 +260,18 @@ def run_pair(
     seed: int,
     every: int,
     device: str = "cpu",
+    extra_kwargs: dict[str, dict] | None = None,
 ) -> dict:
-    """Build both models (untimed), then run their learn() calls taking turns; one result dict per algorithm."""
+    """
+    Build both models (untimed), then run their learn() calls taking turns; one result dict per algorithm.
+
+    :param extra_kwargs: per class name (``DQN``, ``OffOnDQN``), constructor arguments of that run only
+    """
     names = tuple(algo.__name__ for algo in order)
     baton = Baton(*names)
     models, callbacks = {}, {}
     for name, algo in zip(names, order, strict=True):
-        models[name] = build(algo, env_id, hyperparams, seed, device)
+        models[name] = build(algo, env_id, hyperparams, seed, device, (extra_kwargs or {}).get(name))
         callbacks[name] = TakeTurns(baton, name, every, rng_states=global_rng_states())
     cpu_seconds = {}
 
@@ -317,6 +339,7 @@ def markdown_table(result: dict) -> str:
         f"{result['env']}, {result['timesteps']} env steps per run, {result['repeats']} pairs taking turns every "
         f"{result['switch_every']} env steps, "
         f"seed {result['seed']}, {result['policy']} on {result['device']} ({result['device_name']}), "
+        f"baseline {result.get('baseline', 'dqn')}, OffOnDQN targets {result.get('mode', 'paper')}, "
         f"{result['threads']} torch thread(s), load average "
         f"{result['loadavg_start'][0]:.2f} at start / {result['loadavg_end'][0]:.2f} at end ({result['cpu_count']} CPUs), "
         f"sb3_offon {result['git']}, SB3 {result['versions']['stable_baselines3']}, torch {result['versions']['torch']}",
@@ -365,6 +388,8 @@ if __name__ == "__main__":
     args = parse_args()
     th.set_num_threads(args.threads)
     hyperparams = ZOO_HYPERPARAMS[args.env]  # one dict, passed as it is to both algorithms
+    # The baseline's and OffOnDQN's own arguments (the "DQN" columns are the baseline's, n-step DQN's with dqn_nstep)
+    extra_kwargs = {"DQN": BASELINES[args.baseline], "OffOnDQN": MODES[args.mode]}
     make_env(args.env).close()  # fail early if the env (Box2D for LunarLander) is missing
     if args.device == "cuda" and not th.cuda.is_available():
         raise SystemExit("--device cuda: no CUDA device")
@@ -381,6 +406,9 @@ if __name__ == "__main__":
         "device_name": th.cuda.get_device_name() if args.device == "cuda" else platform.processor() or platform.machine(),
         "policy": POLICIES[args.env],
         "hyperparams": hyperparams,
+        "baseline": args.baseline,
+        "baseline_kwargs": BASELINES[args.baseline],
+        "mode": args.mode,
         "cpu_count": os.cpu_count(),
         "platform": platform.platform(),
         "processor": platform.processor(),
@@ -402,17 +430,28 @@ if __name__ == "__main__":
         f"{args.env}: {args.repeats} pairs of {args.timesteps} env steps, seed {args.seed}, {args.threads} thread(s), "
         f"device {args.device} ({result['device_name']})"
     )
-    print(f"hyperparams: {hyperparams}")
+    print(f"hyperparams: {hyperparams}; baseline {args.baseline} {BASELINES[args.baseline]}, OffOnDQN {MODES[args.mode]}")
     print(f"load average at start: {result['loadavg_start']} ({result['cpu_count']} CPUs)")
 
     if args.warmup_timesteps > 0:
-        run_pair((DQN, OffOnDQN), args.env, hyperparams, args.warmup_timesteps, args.seed, args.switch_every, args.device)
+        run_pair(
+            (DQN, OffOnDQN),
+            args.env,
+            hyperparams,
+            args.warmup_timesteps,
+            args.seed,
+            args.switch_every,
+            args.device,
+            extra_kwargs,
+        )
         print(f"warm-up done ({args.warmup_timesteps} steps of each, untimed)")
 
     for repeat in range(args.repeats):
         order = (DQN, OffOnDQN) if repeat % 2 == 0 else (OffOnDQN, DQN)
         pair = {"repeat": repeat, "order": f"{order[0].__name__} starts"}
-        pair.update(run_pair(order, args.env, hyperparams, args.timesteps, args.seed, args.switch_every, args.device))
+        pair.update(
+            run_pair(order, args.env, hyperparams, args.timesteps, args.seed, args.switch_every, args.device, extra_kwargs)
+        )
         for run in (pair["DQN"], pair["OffOnDQN"]):
             print(
                 f"  pair {repeat} {run['algo']:>8}: {run['steps_per_second']:7.1f} steps/s "

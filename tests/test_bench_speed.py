@@ -10,6 +10,7 @@ import importlib.util
 from pathlib import Path
 
 import numpy as np
+import pytest
 from stable_baselines3 import DQN
 
 from sb3_offon import OffOnDQN
@@ -32,7 +33,12 @@ def parameters_digest(model) -> str:
     return hashlib.sha1(b"".join(p.detach().numpy().tobytes() for p in model.policy.parameters())).hexdigest()
 
 
-def test_runs_taking_turns_learn_what_they_learn_alone(monkeypatch):
+@pytest.mark.parametrize(
+    "extra_kwargs",
+    [None, {"DQN": {"n_steps": 10}, "OffOnDQN": {"mc_mixing": "lambda", "mc_initial_prob": 0.9, "mc_final_prob": 0.9}}],
+    ids=["dqn-paper", "nstep-lambda"],
+)
+def test_runs_taking_turns_learn_what_they_learn_alone(monkeypatch, extra_kwargs):
     bench_speed = load_script()
     # Keep each pair's models, to compare them with runs made alone
     built = []
@@ -45,10 +51,15 @@ def test_runs_taking_turns_learn_what_they_learn_alone(monkeypatch):
 
     monkeypatch.setattr(bench_speed, "build", keep)
     # Hand over every 50 steps: a dozen turns each, in the middle of rollouts and of training bursts
-    runs = bench_speed.run_pair((DQN, OffOnDQN), "CartPole-v1", HYPERPARAMS, TIMESTEPS, seed=3, every=50)
+    runs = bench_speed.run_pair(
+        (DQN, OffOnDQN), "CartPole-v1", HYPERPARAMS, TIMESTEPS, seed=3, every=50, extra_kwargs=extra_kwargs
+    )
 
     for model in built:
-        alone = type(model)("MlpPolicy", "CartPole-v1", seed=3, device="cpu", **HYPERPARAMS).learn(TIMESTEPS)
+        own = (extra_kwargs or {}).get(type(model).__name__, {})
+        alone = type(model)("MlpPolicy", "CartPole-v1", seed=3, device="cpu", **HYPERPARAMS, **own).learn(TIMESTEPS)
+        for key, value in own.items():
+            assert getattr(model, key) == value, key
         assert parameters_digest(model) == parameters_digest(alone), type(model).__name__
         run = runs[type(model).__name__]
         assert run["env_steps"] == alone.num_timesteps
