@@ -104,7 +104,7 @@ def _sample_mc_params(trial: optuna.Trial, lambda_returns: bool = False) -> dict
     With ``lambda_returns``, delta1 is lambda and ``mc_mixing`` stays ``"lambda"`` (the YAML's); otherwise it is one of
     the coin-flip modes (the search space of the paper's variants, as it was before the lambda mode existed).
     """
-    sampled = {
+    sampled: dict[str, Any] = {
         "mc_initial_prob": trial.suggest_float("mc_initial_prob", 0.5, 1.0),
         "mc_final_prob": trial.suggest_float("mc_final_prob", 0.0, 0.5),
         "mc_fraction": trial.suggest_float("mc_fraction", 0.1, 1.0),
@@ -121,7 +121,7 @@ def _sample_qlearning_params(trial: optuna.Trial, sarsa_target: bool = True) -> 
     delta2, the probability of Q-learning given a TD target, as a decaying schedule, and the Sarsa option (not with
     lambda-returns, where delta2 weighs the trace after a non-greedy action and no Sarsa target is made).
     """
-    sampled = {
+    sampled: dict[str, Any] = {
         "qlearning_initial_prob": trial.suggest_float("qlearning_initial_prob", 0.5, 1.0),
         "qlearning_final_prob": trial.suggest_float("qlearning_final_prob", 0.0, 0.5),
         "qlearning_fraction": trial.suggest_float("qlearning_fraction", 0.1, 1.0),

@@ -422,3 +422,21 @@ def test_dict_observations_and_vecnormalize():
     values, _ = model_target(model)(next_obs)
     terminated = buffer.dones[cache.slots, cache.envs] * (1 - buffer.timeouts[cache.slots, cache.envs])
     np.testing.assert_allclose(cache.returns, rewards + 0.9 * (1 - terminated) * values, rtol=1e-5, atol=1e-5)
+
+
+def test_optimize_memory_usage_model_matches_the_formula():
+    model = OffOnDQN(
+        "MlpPolicy",
+        "CartPole-v1",
+        seed=0,
+        buffer_size=120,
+        optimize_memory_usage=True,
+        replay_buffer_kwargs=dict(handle_timeout_termination=False),
+        **SMALL,
+        **LAMBDA,
+    )
+    model.learn(300)  # the ring wraps twice
+    model._lambda_cache = None
+    cache = model._refreshed_lambda_cache(10**6)
+    assert model.replay_buffer.pos not in cache.slots
+    assert_matches_reference(cache, reference_lambda_returns(model.replay_buffer, model_target(model), model.gamma, 0.9, 1.0))

@@ -8,7 +8,7 @@ import torch as th
 from gymnasium import spaces
 from stable_baselines3.common.buffers import ReplayBuffer
 from stable_baselines3.common.policies import BasePolicy
-from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule, TrainFrequencyUnit
+from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 from stable_baselines3.common.utils import LinearSchedule, obs_as_tensor
 from stable_baselines3.dqn import DQN
 from stable_baselines3.dqn.policies import DQNPolicy
@@ -19,10 +19,11 @@ from sb3_offon.common.buffers import (
     OffOnDictReplayBuffer,
     OffOnNStepReplayBuffer,
     OffOnReplayBuffer,
-    OffOnReplayBufferSamples,
     reward_scale,
 )
-from sb3_offon.offon_dqn.lambda_returns import LambdaReturnCache, compute_lambda_returns
+from sb3_offon.offon_dqn.coin_flip_targets import CoinFlipTargetsMixin
+from sb3_offon.offon_dqn.lambda_returns import LambdaReturnCache
+from sb3_offon.offon_dqn.lambda_training import LambdaTrainingMixin
 from sb3_offon.offon_dqn.policies import CnnPolicy, MlpPolicy, MultiInputPolicy
 
 SelfOffOnDQN = TypeVar("SelfOffOnDQN", bound="OffOnDQN")
@@ -62,7 +63,7 @@ def _real_number(name: str, value: Any) -> float:
     return float(value)
 
 
-class OffOnDQN(DQN):
+class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, DQN):
     """
     Offline-Online DQN: a DQN whose regression target is drawn, per sample, among the offline Monte-Carlo return
     of the finished episode, the Q-learning target and the Sarsa target.
@@ -91,6 +92,40 @@ class OffOnDQN(DQN):
     - With VecNormalize's reward normalisation, the buffer keeps raw rewards (as SB3 does) and raw returns; sampled
       returns are divided by the same factor as the rewards (without the per-reward clip), and a truncation's
       bootstrap, in the normalised units the network learnt, is converted to raw units when the episode ends.
+
+    ``mc_mixing="lambda"`` reads delta1 and delta2 as weights instead of coin flips. The target of a transition t is
+    its lambda-return G_t: r_t where t terminated its episode; r_t + gamma * V(s_{t+1}) where t was cut (by a time
+    limit or a reset) or is the newest transition of an episode still running; otherwise
+    G_t = r_t + gamma * [(1 - lam * c_{t+1}) * V(s_{t+1}) + lam * c_{t+1} * G_{t+1}], with V(s) = max_a Q_target(s, a),
+    c_{t+1} = 1 where the recorded a_{t+1} is the target network's greedy action at s_{t+1} and 1 - delta2 elsewhere.
+
+    - lambda = delta1, the current value of the ``mc_*`` schedule: how far the target looks ahead, from the one-step
+      Q-learning target (lambda = 0) to the Monte-Carlo return (lambda = 1 with no cuts).
+    - delta2, the current value of the ``qlearning_*`` schedule: how strictly the target follows the greedy policy.
+      delta2 = 1 cuts the trace at every non-greedy action: Watkins's Q(lambda) (Watkins 1989), whose fixed point is Q*
+      on stochastic tasks too; delta2 = 0 never cuts: Peng's Q(lambda) (Peng & Williams 1996; Kozuno et al., "Revisiting
+      Peng's Q(lambda) for Modern Reinforcement Learning", ICML 2021), faster but biased toward the behaviour policy.
+    - The returns are computed as in DQN(lambda) (Daley & Amato, "Reconciling lambda-Returns with Experience Replay",
+      NeurIPS 2019): at the first training call after each target network update (or every
+      ``lambda_refresh_interval`` env steps), blocks of ``lambda_block_size`` consecutive stored transitions are picked
+      at random until they hold as many transitions as will be trained on before the next refresh (each once, in
+      random order, then again if more are needed); one batched pass of the target network gives V and the greedy
+      actions of their next states, and the recursion runs backwards over all blocks at once. Minibatches are drawn
+      from these cached returns. The network behind a cached value is the current target network with the default
+      refresh (it does not change between two of its updates), and at most ``lambda_refresh_interval`` env steps
+      old otherwise; lambda and delta2 are the schedules' values at the refresh. Transitions added since the last
+      refresh wait for the next one, and cached ones overwritten since are skipped.
+    - Cost: one target network pass per computed return, which replaces the pass per sampled transition of the
+      other modes, plus O(n log n) NumPy work for n returns; independent of ``buffer_size`` except for picking the
+      blocks (O(buffer_size / lambda_block_size)). When the buffer holds no more than a refresh needs, each env's
+      whole history is one block, and no trace is cut at a block's end; otherwise the last transition of a block
+      bootstraps as the newest of a running episode does (a truncated lambda-return, as in DQN(lambda)).
+    - ``mc_truncation``: ``"bootstrap"`` and ``"drop"`` end a cut episode's trace with gamma * V(s_T) from the target
+      network of the refresh (the lambda-return there is the one-step TD target, so no return is left unknown);
+      ``"terminal"`` ends it with 0, as after a termination. ``sarsa_target`` and ``n_steps`` play no part
+      (``n_steps > 1`` is a ``ValueError``: lambda-returns already blend every horizon).
+    - Logged: ``train/lambda`` and ``train/trace_cut_fraction``, the share of the continuations whose trace weight
+      c_{t+1} was below 1 (non-greedy next actions with delta2 > 0), both of the refresh in use.
 
     :param policy: The policy model to use (MlpPolicy, CnnPolicy, ...)
     :param env: The environment to learn from (if registered in Gym, can be str)
@@ -131,7 +166,8 @@ class OffOnDQN(DQN):
         y = max(G, y_TD), where the delta1 draw picks it and G is known (MCAC, Wilcox et al. 2022; Optimality
         Tightening, He et al. 2017; Self-Imitation Learning, Oh et al. 2018). In a deterministic environment any
         observed return after (s, a) is achievable, so it bounds Q* from below however old the policy that earned it;
-        in a stochastic one it is optimistic.
+        in a stochastic one it is optimistic. ``"lambda"``: every target is the lambda-return described above
+        (lambda = delta1, trace cuts weighted by delta2; Watkins's and Peng's Q(lambda), DQN(lambda)).
     :param sarsa_target: ``"sampled"`` bootstraps from the recorded next action (Q-learning where it is unknown);
         ``"expected"`` from the expectation under the current epsilon-greedy policy (Expected Sarsa)
     :param mc_truncation: return after a time-limit truncation: ``"bootstrap"``, gamma * max_a Q_target(s_T, a)
@@ -142,6 +178,11 @@ class OffOnDQN(DQN):
         computed once, when the episode ends, and not refreshed: episodes cut before ``learning_starts`` keep the
         untrained target network's estimate (``"drop"`` avoids it)
     :param loss: ``"huber"`` (SB3's DQN) or ``"mse"`` (the paper)
+    :param lambda_block_size: ``mc_mixing="lambda"``: the number of consecutive stored transitions whose lambda-returns
+        are computed together (a trace is cut at a block's end unless the episode ended there first)
+    :param lambda_refresh_interval: ``mc_mixing="lambda"``: recompute the cached lambda-returns every this many env
+        steps; None (default): whenever the target network is updated (every ``target_update_interval`` steps). Set it
+        with soft target updates every step (``tau`` < 1), where refreshing at each update would cost most
     :param stats_window_size: Window size for the rollout logging, specifying the number of episodes to average
         the reported success rate, mean episode length, and mean reward over
     :param tensorboard_log: the log location for tensorboard (if None, no logging)
@@ -492,122 +533,9 @@ class OffOnDQN(DQN):
             th.stack(losses), th.cat(q_taken), th.cat(mc_returns), n_mc_targets, n_sarsa_targets, bound_active
         )
 
-    def _train_on_lambda_returns(self, gradient_steps: int, batch_size: int) -> None:
-        """
-        ``gradient_steps`` updates of the Q-network towards the cached lambda-returns of ``mc_mixing="lambda"``.
-
-        The minibatches are drawn from the cache (refreshed first if the target network changed), gathered and uploaded
-        in chunks as in :meth:`train`; no target network runs here: the refresh ran it once for the whole cache.
-        """
-        assert isinstance(self.replay_buffer, OffOnBufferMixin)
-        self.policy.set_training_mode(True)
-        self._update_learning_rate(self.policy.optimizer)
-        loss_fn = LOSS_FUNCTIONS[self.loss]
-        n_samples = gradient_steps * batch_size
-        cache = self._refreshed_lambda_cache(n_samples)
-        entries = cache.draw(n_samples, self.replay_buffer)
-        if entries is None:  # everything cached was overwritten since the refresh: compute afresh
-            self._lambda_cache = None
-            cache = self._refreshed_lambda_cache(n_samples)
-            entries = cache.draw(n_samples, self.replay_buffer)
-            assert entries is not None
-        parameters = list(self.policy.parameters())
-        losses = []
-        steps_per_chunk = self._steps_per_chunk(batch_size)
-        for first_step in range(0, gradient_steps, steps_per_chunk):
-            n_steps = min(steps_per_chunk, gradient_steps - first_step)
-            chunk = entries[first_step * batch_size : (first_step + n_steps) * batch_size]
-            observations, actions = self.replay_buffer.observations_and_actions(
-                cache.slots[chunk], cache.envs[chunk], self._vec_normalize_env
-            )
-            observations_tensor = obs_as_tensor(observations, self.device)
-            actions_tensor = self._to_device(actions).long()
-            targets = self._to_device(cache.returns[chunk].reshape(-1, 1))
-            for step in range(n_steps):
-                rows = slice(step * batch_size, (step + 1) * batch_size)
-                current_q_values = self.q_net(_rows(observations_tensor, rows))
-                current_q_values = th.gather(current_q_values, dim=1, index=actions_tensor[rows])
-                loss = loss_fn(current_q_values, targets[rows])
-
-                self.policy.optimizer.zero_grad()
-                loss.backward()
-                th.nn.utils.clip_grad_norm_(parameters, self.max_grad_norm)
-                self.policy.optimizer.step()
-                losses.append(loss.detach())
-
-        self._n_updates += gradient_steps
-        self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
-        self.logger.record("train/loss", th.stack(losses).mean().item())
-        self.logger.record("train/lambda", cache.lam)
-        self.logger.record("train/trace_cut_fraction", cache.trace_cut_fraction)
-
-    def _lambda_refresh_key(self) -> int:
-        """
-        Changes exactly when the cached lambda-returns are due: at each target network update (SB3's ``_on_step``
-        updates it every ``target_update_interval // n_envs`` calls), or every ``lambda_refresh_interval`` env steps.
-        """
-        if self.lambda_refresh_interval is not None:
-            return self.num_timesteps // self.lambda_refresh_interval
-        return self._n_calls // max(self.target_update_interval // self.n_envs, 1)
-
-    def _refreshed_lambda_cache(self, n_samples: int) -> LambdaReturnCache:
-        """The cached lambda-returns, computed afresh if there are none yet or the refresh key changed."""
-        key = self._lambda_refresh_key()
-        if self._lambda_cache is not None and self._lambda_cache.key == key:
-            return self._lambda_cache
-        assert isinstance(self.replay_buffer, OffOnBufferMixin)
-        self._lambda_cache = compute_lambda_returns(
-            self.replay_buffer,
-            self._target_values_and_actions,
-            n_wanted=max(n_samples, self._lambda_samples_per_refresh()),
-            block_size=self.lambda_block_size,
-            gamma=self.gamma,
-            lam=self.mc_prob,
-            qlearning_prob=self.qlearning_prob,
-            cut_is_terminal=self.mc_truncation == "terminal",
-            key=key,
-            env=self._vec_normalize_env,
-        )
-        return self._lambda_cache
-
-    def _lambda_samples_per_refresh(self) -> int:
-        """
-        How many transitions will be trained on from one refresh to the next (with ``train_freq`` in steps; in
-        episodes, this is unknown and one training call's count is used): each refresh computes about as many
-        lambda-returns, so that each is used about once.
-        """
-        if self.train_freq.unit != TrainFrequencyUnit.STEP:  # type: ignore[union-attr]
-            return 0
-        steps_per_call = self.train_freq.frequency * self.n_envs  # type: ignore[union-attr]
-        if self.lambda_refresh_interval is not None:
-            steps_per_refresh = self.lambda_refresh_interval
-        else:
-            steps_per_refresh = max(self.target_update_interval // self.n_envs, 1) * self.n_envs
-        calls_per_refresh = max(1, math.ceil(steps_per_refresh / steps_per_call))
-        gradient_steps = self.gradient_steps if self.gradient_steps >= 0 else steps_per_call
-        return calls_per_refresh * gradient_steps * self.batch_size
-
-    def _target_values_and_actions(self, observations: np.ndarray | dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-        """
-        max_a Q_target(s, a) and its argmax for a batch of (normalised) observations in the buffer's layout, in chunks
-        of at most ``MAX_CHUNK_BYTES`` of float observations, read back to the host once.
-        """
-        first = next(iter(observations.values())) if isinstance(observations, dict) else observations
-        n_observations = len(first)
-        rows_per_chunk = self._steps_per_chunk(1) * 2  # _steps_per_chunk counts observations and next observations
-        values, actions = [], []
-        with th.no_grad():
-            for start in range(0, n_observations, rows_per_chunk):
-                rows = slice(start, start + rows_per_chunk)
-                q_values = self.q_net_target(obs_as_tensor(_rows(observations, rows), self.device))
-                chunk_values, chunk_actions = q_values.max(dim=1)
-                values.append(chunk_values)
-                actions.append(chunk_actions)
-        if not values:
-            return np.zeros(0, dtype=np.float32), np.zeros(0, dtype=np.int64)
-        # One read-back for both (an action index is exact in float32 up to 2**24 actions)
-        both = th.stack([th.cat(values), th.cat(actions).to(values[0].dtype)]).cpu().numpy()
-        return both[0], both[1].astype(np.int64)
+    def _loss_fn(self) -> Any:
+        # Looked up at each call, so that a test can swap the function in LOSS_FUNCTIONS
+        return LOSS_FUNCTIONS[self.loss]
 
     def _steps_per_chunk(self, batch_size: int) -> int:
         """
@@ -623,125 +551,9 @@ class OffOnDQN(DQN):
         sample_bytes = 2 * 4 * sum(math.prod(space.shape or (1,)) for space in observation_spaces)
         return max(1, MAX_CHUNK_BYTES // (batch_size * max(sample_bytes, 1)))
 
-    def _target_choice(
-        self, mc_returns: np.ndarray, next_actions: np.ndarray, mc_drawn: np.ndarray, sarsa_drawn: np.ndarray
-    ) -> tuple[np.ndarray | None, np.ndarray | None]:
-        """
-        Which target each sample gets, decided on the host from its return and next action (NumPy arrays as sampled).
-
-        :param mc_returns: per sample, the Monte-Carlo return (NaN: unknown)
-        :param next_actions: per sample, the action taken at s' (-1: unknown)
-        :param mc_drawn: per sample, whether the draw picked the Monte-Carlo target (used where G is known)
-        :param sarsa_drawn: per sample, whether the draw picked Sarsa over Q-learning (used where a' is known)
-        :return: the masks of samples whose target is Monte-Carlo (or, with ``mc_mixing`` ``"convex"``/``"max"``, whose
-            target the return enters) and Sarsa; None where that target is not drawn at all
-        """
-        use_mc = use_sarsa = None
-        if self.mc_prob > 0.0:
-            known_return = ~np.isnan(mc_returns)
-            use_mc = known_return if self.mc_mixing == "convex" else known_return & mc_drawn
-        if self.qlearning_prob < 1.0:
-            known_action = np.ones(next_actions.shape, dtype=bool) if self.sarsa_target == "expected" else next_actions >= 0
-            use_sarsa = known_action & sarsa_drawn
-            if use_mc is not None and self.mc_mixing == "sample":
-                use_sarsa &= ~use_mc  # a Monte-Carlo target replaces the TD target altogether
-        return use_mc, use_sarsa
-
-    def _targets(
-        self, replay_data: OffOnReplayBufferSamples, use_mc: np.ndarray | None, use_sarsa: np.ndarray | None
-    ) -> tuple[th.Tensor, th.Tensor | None]:
-        """
-        The regression targets of a batch of samples (one or several minibatches), from the target choice of
-        :meth:`_target_choice`. Nothing is read back from the device.
-
-        :param replay_data: the samples
-        :param use_mc: the samples whose target is (or, mixed, includes) their Monte-Carlo return; None: none
-        :param use_sarsa: the samples whose TD target is Sarsa's; None: none
-        :return: the targets and (``mc_mixing="max"``) the mask, on the device, of samples where the return was above
-            the TD target and so decided it
-        """
-        bound_active = None
-        # For n-step replay, discount factor is gamma**n_steps (when no early termination)
-        discounts = replay_data.discounts if replay_data.discounts is not None else self.gamma
-        next_q_values_all = self.q_net_target(replay_data.next_observations)
-        next_q_values, greedy_actions = next_q_values_all.max(dim=1)
-        next_q_values = next_q_values.reshape(-1, 1)
-        if use_sarsa is not None and np.count_nonzero(use_sarsa):
-            next_q_values = self._sarsa_next_values(replay_data, next_q_values_all, next_q_values, greedy_actions, use_sarsa)
-        # Written as in SB3's DQN: with Q-learning only, the targets are bit-identical
-        target_q_values = replay_data.rewards + (1 - replay_data.dones) * discounts * next_q_values
-
-        if use_mc is not None and np.count_nonzero(use_mc):
-            mc_targets = replay_data.mc_returns
-            use_mc_tensor = self._to_device(use_mc)
-            if self.mc_mixing == "convex":
-                mc_targets = self.mc_prob * mc_targets + (1.0 - self.mc_prob) * target_q_values
-            elif self.mc_mixing == "max":
-                # The return as a lower bound: it decides the target only where it is above the TD target
-                bound_active = use_mc_tensor & (mc_targets > target_q_values)
-                mc_targets = th.maximum(mc_targets, target_q_values)
-            target_q_values = th.where(use_mc_tensor, mc_targets, target_q_values)
-        return target_q_values, bound_active
-
     def _to_device(self, array: np.ndarray) -> th.Tensor:
         # from_numpy then to(): a few times cheaper than as_tensor(..., device=...) for a small array on the CPU
         return th.from_numpy(array).to(self.device)
-
-    def _sarsa_next_values(
-        self,
-        replay_data: OffOnReplayBufferSamples,
-        next_q_values_all: th.Tensor,
-        max_next_q_values: th.Tensor,
-        greedy_actions: th.Tensor,
-        use_sarsa: np.ndarray,
-    ) -> th.Tensor:
-        """The values of the next states: Sarsa's where ``use_sarsa``, max_a Q_target(s', a) elsewhere."""
-        use_sarsa_tensor = self._to_device(use_sarsa)
-        if self.sarsa_target == "expected":
-            # Expectation under the behaviour policy: epsilon-greedy on the online network
-            behaviour_greedy = self.q_net(replay_data.next_observations).argmax(dim=1, keepdim=True)
-            greedy_values = th.gather(next_q_values_all, dim=1, index=behaviour_greedy)
-            expected = self.exploration_rate * next_q_values_all.mean(dim=1, keepdim=True)
-            expected = expected + (1.0 - self.exploration_rate) * greedy_values
-            return th.where(use_sarsa_tensor, expected, max_next_q_values)
-        # One gather, on the device: at the recorded next action a' for Sarsa, at the target network's greedy action
-        # elsewhere (which reads back exactly the max; a' is -1 there where unknown, and not used)
-        bootstrap_actions = th.where(use_sarsa_tensor, replay_data.next_actions, greedy_actions.reshape(-1, 1))
-        return th.gather(next_q_values_all, dim=1, index=bootstrap_actions)
-
-    def _record_target_statistics(
-        self,
-        losses: th.Tensor,
-        q_taken: th.Tensor,
-        mc_returns: th.Tensor,
-        n_mc_targets: int,
-        n_sarsa_targets: int,
-        bound_active: list[th.Tensor] | None = None,
-    ) -> None:
-        """
-        Log a training call's statistics, with one read from the device.
-
-        :param losses: the loss of each gradient step
-        :param q_taken: Q(s, a) of every sample, as the online network gave it at its step
-        :param mc_returns: every sample's return (NaN: unknown)
-        :param n_mc_targets: the number of samples whose target is (or includes) the return
-        :param n_sarsa_targets: the number of samples whose TD target is Sarsa's
-        :param bound_active: ``mc_mixing="max"``: masks of the samples whose target the return decided
-        """
-        # NaN where G is unknown: nansum leaves those samples out of the sum, and the count of known ones divides it
-        gaps = q_taken - mc_returns
-        n_bound_active = sum(mask.sum() for mask in bound_active) if bound_active else th.zeros((), device=losses.device)
-        loss, gap_sum, n_known, n_bound = th.stack(
-            [losses.mean(), th.nansum(gaps), (gaps == gaps).sum().to(losses.dtype), th.as_tensor(n_bound_active).to(losses)]
-        ).tolist()
-        n_samples = len(mc_returns)
-        self.logger.record("train/loss", loss)
-        self.logger.record("train/mc_target_fraction", n_mc_targets / n_samples)
-        self.logger.record("train/sarsa_target_fraction", n_sarsa_targets / n_samples)
-        if self.mc_mixing == "max":
-            self.logger.record("train/mc_bound_active_fraction", n_bound / n_samples)
-        if n_known > 0:
-            self.logger.record("train/q_mc_gap", gap_sum / n_known)
 
     def learn(
         self: SelfOffOnDQN,

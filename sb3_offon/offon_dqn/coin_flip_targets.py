@@ -1,0 +1,147 @@
+"""
+OffOnDQN's coin-flip targets (``mc_mixing`` ``"sample"``, ``"convex"``, ``"max"``): which target each sample gets, the
+targets themselves, Sarsa's bootstrap, and the statistics of a training call.
+"""
+
+from collections.abc import Callable
+
+import numpy as np
+import torch as th
+from stable_baselines3.common.logger import Logger
+from stable_baselines3.dqn.policies import QNetwork
+
+from sb3_offon.common.buffers import OffOnDictReplayBufferSamples, OffOnReplayBufferSamples
+
+Samples = OffOnReplayBufferSamples | OffOnDictReplayBufferSamples
+
+
+class CoinFlipTargetsMixin:
+    """The targets of :class:`sb3_offon.OffOnDQN` where one is drawn per sample (see its docstring)."""
+
+    # Attributes and methods of OffOnDQN (and SB3's DQN), declared for type checkers
+    q_net: QNetwork
+    q_net_target: QNetwork
+    logger: Logger
+    gamma: float
+    mc_prob: float
+    qlearning_prob: float
+    mc_mixing: str
+    sarsa_target: str
+    exploration_rate: float
+    _to_device: Callable[[np.ndarray], th.Tensor]
+
+    def _target_choice(
+        self, mc_returns: np.ndarray, next_actions: np.ndarray, mc_drawn: np.ndarray, sarsa_drawn: np.ndarray
+    ) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """
+        Which target each sample gets, decided on the host from its return and next action (NumPy arrays as sampled).
+
+        :param mc_returns: per sample, the Monte-Carlo return (NaN: unknown)
+        :param next_actions: per sample, the action taken at s' (-1: unknown)
+        :param mc_drawn: per sample, whether the draw picked the Monte-Carlo target (used where G is known)
+        :param sarsa_drawn: per sample, whether the draw picked Sarsa over Q-learning (used where a' is known)
+        :return: the masks of samples whose target is Monte-Carlo (or, with ``mc_mixing`` ``"convex"``/``"max"``, whose
+            target the return enters) and Sarsa; None where that target is not drawn at all
+        """
+        use_mc = use_sarsa = None
+        if self.mc_prob > 0.0:
+            known_return = ~np.isnan(mc_returns)
+            use_mc = known_return if self.mc_mixing == "convex" else known_return & mc_drawn
+        if self.qlearning_prob < 1.0:
+            known_action = np.ones(next_actions.shape, dtype=bool) if self.sarsa_target == "expected" else next_actions >= 0
+            use_sarsa = known_action & sarsa_drawn
+            if use_mc is not None and self.mc_mixing == "sample":
+                use_sarsa &= ~use_mc  # a Monte-Carlo target replaces the TD target altogether
+        return use_mc, use_sarsa
+
+    def _targets(
+        self, replay_data: Samples, use_mc: np.ndarray | None, use_sarsa: np.ndarray | None
+    ) -> tuple[th.Tensor, th.Tensor | None]:
+        """
+        The regression targets of a batch of samples (one or several minibatches), from the target choice of
+        :meth:`_target_choice`. Nothing is read back from the device.
+
+        :param replay_data: the samples
+        :param use_mc: the samples whose target is (or, mixed, includes) their Monte-Carlo return; None: none
+        :param use_sarsa: the samples whose TD target is Sarsa's; None: none
+        :return: the targets and (``mc_mixing="max"``) the mask, on the device, of samples where the return was above
+            the TD target and so decided it
+        """
+        bound_active = None
+        # For n-step replay, discount factor is gamma**n_steps (when no early termination)
+        discounts = replay_data.discounts if replay_data.discounts is not None else self.gamma
+        next_q_values_all = self.q_net_target(replay_data.next_observations)
+        next_q_values, greedy_actions = next_q_values_all.max(dim=1)
+        next_q_values = next_q_values.reshape(-1, 1)
+        if use_sarsa is not None and np.count_nonzero(use_sarsa):
+            next_q_values = self._sarsa_next_values(replay_data, next_q_values_all, next_q_values, greedy_actions, use_sarsa)
+        # Written as in SB3's DQN: with Q-learning only, the targets are bit-identical
+        target_q_values = replay_data.rewards + (1 - replay_data.dones) * discounts * next_q_values
+
+        if use_mc is not None and np.count_nonzero(use_mc):
+            mc_targets = replay_data.mc_returns
+            use_mc_tensor = self._to_device(use_mc)
+            if self.mc_mixing == "convex":
+                mc_targets = self.mc_prob * mc_targets + (1.0 - self.mc_prob) * target_q_values
+            elif self.mc_mixing == "max":
+                # The return as a lower bound: it decides the target only where it is above the TD target
+                bound_active = use_mc_tensor & (mc_targets > target_q_values)
+                mc_targets = th.maximum(mc_targets, target_q_values)
+            target_q_values = th.where(use_mc_tensor, mc_targets, target_q_values)
+        return target_q_values, bound_active
+
+    def _sarsa_next_values(
+        self,
+        replay_data: Samples,
+        next_q_values_all: th.Tensor,
+        max_next_q_values: th.Tensor,
+        greedy_actions: th.Tensor,
+        use_sarsa: np.ndarray,
+    ) -> th.Tensor:
+        """The values of the next states: Sarsa's where ``use_sarsa``, max_a Q_target(s', a) elsewhere."""
+        use_sarsa_tensor = self._to_device(use_sarsa)
+        if self.sarsa_target == "expected":
+            # Expectation under the behaviour policy: epsilon-greedy on the online network
+            behaviour_greedy = self.q_net(replay_data.next_observations).argmax(dim=1, keepdim=True)
+            greedy_values = th.gather(next_q_values_all, dim=1, index=behaviour_greedy)
+            expected = self.exploration_rate * next_q_values_all.mean(dim=1, keepdim=True)
+            expected = expected + (1.0 - self.exploration_rate) * greedy_values
+            return th.where(use_sarsa_tensor, expected, max_next_q_values)
+        # One gather, on the device: at the recorded next action a' for Sarsa, at the target network's greedy action
+        # elsewhere (which reads back exactly the max; a' is -1 there where unknown, and not used)
+        bootstrap_actions = th.where(use_sarsa_tensor, replay_data.next_actions, greedy_actions.reshape(-1, 1))
+        return th.gather(next_q_values_all, dim=1, index=bootstrap_actions)
+
+    def _record_target_statistics(
+        self,
+        losses: th.Tensor,
+        q_taken: th.Tensor,
+        mc_returns: th.Tensor,
+        n_mc_targets: int,
+        n_sarsa_targets: int,
+        bound_active: list[th.Tensor] | None = None,
+    ) -> None:
+        """
+        Log a training call's statistics, with one read from the device.
+
+        :param losses: the loss of each gradient step
+        :param q_taken: Q(s, a) of every sample, as the online network gave it at its step
+        :param mc_returns: every sample's return (NaN: unknown)
+        :param n_mc_targets: the number of samples whose target is (or includes) the return
+        :param n_sarsa_targets: the number of samples whose TD target is Sarsa's
+        :param bound_active: ``mc_mixing="max"``: masks of the samples whose target the return decided
+        """
+        # NaN where G is unknown: nansum leaves those samples out of the sum, and the count of known ones divides it
+        gaps = q_taken - mc_returns
+        n_bound_active = sum(mask.sum() for mask in bound_active) if bound_active else th.zeros((), device=losses.device)
+        loss, gap_sum, n_known, n_bound = th.stack(
+            [losses.mean(), th.nansum(gaps), (gaps == gaps).sum().to(losses.dtype), th.as_tensor(n_bound_active).to(losses)]
+        ).tolist()
+        n_samples = len(mc_returns)
+        self.logger.record("train/loss", loss)
+        self.logger.record("train/mc_target_fraction", n_mc_targets / n_samples)
+        self.logger.record("train/sarsa_target_fraction", n_sarsa_targets / n_samples)
+        if self.mc_mixing == "max":
+            self.logger.record("train/mc_bound_active_fraction", n_bound / n_samples)
+        if n_known > 0:
+            self.logger.record("train/q_mc_gap", gap_sum / n_known)

@@ -1,0 +1,182 @@
+"""
+OffOnDQN's training on lambda-returns (``mc_mixing="lambda"``): when to refresh the cached lambda-returns, how many to
+compute, the target network's pass over the next observations, and the gradient steps on the cached returns.
+The returns themselves are computed in :mod:`sb3_offon.offon_dqn.lambda_returns`.
+"""
+
+import math
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+import torch as th
+from stable_baselines3.common.buffers import ReplayBuffer
+from stable_baselines3.common.logger import Logger
+from stable_baselines3.common.type_aliases import TrainFrequencyUnit
+from stable_baselines3.common.utils import obs_as_tensor
+from stable_baselines3.common.vec_env import VecNormalize
+from stable_baselines3.dqn.policies import QNetwork
+
+from sb3_offon.common.buffers import OffOnBufferMixin
+from sb3_offon.offon_dqn.lambda_returns import LambdaReturnCache, compute_lambda_returns
+
+
+class LambdaTrainingMixin:
+    """
+    The lambda-return training of :class:`sb3_offon.OffOnDQN`, kept apart from its coin-flip targets (see
+    ``mc_mixing="lambda"`` in OffOnDQN's docstring for what is computed, how often, and at what cost).
+    """
+
+    # Attributes and methods of OffOnDQN (and SB3's DQN), declared for type checkers
+    replay_buffer: ReplayBuffer | None
+    policy: Any  # DQNPolicy (SB3 declares it differently in BaseAlgorithm and DQN)
+    q_net: QNetwork
+    q_net_target: QNetwork
+    device: th.device
+    logger: Logger
+    gamma: float
+    batch_size: int
+    gradient_steps: int
+    train_freq: Any  # a TrainFreq once the model is set up
+    n_envs: int
+    target_update_interval: int
+    num_timesteps: int
+    max_grad_norm: float
+    loss: str
+    mc_prob: float
+    qlearning_prob: float
+    mc_truncation: str
+    lambda_block_size: int
+    lambda_refresh_interval: int | None
+    _n_calls: int
+    _n_updates: int
+    _vec_normalize_env: VecNormalize | None
+    _lambda_cache: LambdaReturnCache | None
+    _update_learning_rate: Callable[..., None]
+    _steps_per_chunk: Callable[[int], int]
+    _to_device: Callable[[np.ndarray], th.Tensor]
+    _loss_fn: Callable[[], Callable[[th.Tensor, th.Tensor], th.Tensor]]
+
+    def _train_on_lambda_returns(self, gradient_steps: int, batch_size: int) -> None:
+        """
+        ``gradient_steps`` updates of the Q-network towards the cached lambda-returns of ``mc_mixing="lambda"``.
+
+        The minibatches are drawn from the cache (refreshed first if the target network changed), gathered and uploaded
+        in chunks as in :meth:`train`; no target network runs here: the refresh ran it once for the whole cache.
+        """
+        assert isinstance(self.replay_buffer, OffOnBufferMixin)
+        self.policy.set_training_mode(True)
+        self._update_learning_rate(self.policy.optimizer)
+        loss_fn = self._loss_fn()
+        n_samples = gradient_steps * batch_size
+        cache = self._refreshed_lambda_cache(n_samples)
+        entries = cache.draw(n_samples, self.replay_buffer)
+        if entries is None:  # everything cached was overwritten since the refresh: compute afresh
+            self._lambda_cache = None
+            cache = self._refreshed_lambda_cache(n_samples)
+            entries = cache.draw(n_samples, self.replay_buffer)
+            assert entries is not None
+        parameters = list(self.policy.parameters())
+        losses = []
+        steps_per_chunk = self._steps_per_chunk(batch_size)
+        for first_step in range(0, gradient_steps, steps_per_chunk):
+            n_steps = min(steps_per_chunk, gradient_steps - first_step)
+            chunk = entries[first_step * batch_size : (first_step + n_steps) * batch_size]
+            observations, actions = self.replay_buffer.observations_and_actions(
+                cache.slots[chunk], cache.envs[chunk], self._vec_normalize_env
+            )
+            observations_tensor = obs_as_tensor(observations, self.device)
+            actions_tensor = self._to_device(actions).long()
+            targets = self._to_device(cache.returns[chunk].reshape(-1, 1))
+            for step in range(n_steps):
+                rows = slice(step * batch_size, (step + 1) * batch_size)
+                current_q_values = self.q_net(rows_of(observations_tensor, rows))
+                current_q_values = th.gather(current_q_values, dim=1, index=actions_tensor[rows])
+                loss = loss_fn(current_q_values, targets[rows])
+
+                self.policy.optimizer.zero_grad()
+                loss.backward()
+                th.nn.utils.clip_grad_norm_(parameters, self.max_grad_norm)
+                self.policy.optimizer.step()
+                losses.append(loss.detach())
+
+        self._n_updates += gradient_steps
+        self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
+        self.logger.record("train/loss", th.stack(losses).mean().item())
+        self.logger.record("train/lambda", cache.lam)
+        self.logger.record("train/trace_cut_fraction", cache.trace_cut_fraction)
+
+    def _lambda_refresh_key(self) -> int:
+        """
+        Changes exactly when the cached lambda-returns are due: at each target network update (SB3's ``_on_step``
+        updates it every ``target_update_interval // n_envs`` calls), or every ``lambda_refresh_interval`` env steps.
+        """
+        if self.lambda_refresh_interval is not None:
+            return self.num_timesteps // self.lambda_refresh_interval
+        return self._n_calls // max(self.target_update_interval // self.n_envs, 1)
+
+    def _refreshed_lambda_cache(self, n_samples: int) -> LambdaReturnCache:
+        """The cached lambda-returns, computed afresh if there are none yet or the refresh key changed."""
+        key = self._lambda_refresh_key()
+        if self._lambda_cache is not None and self._lambda_cache.key == key:
+            return self._lambda_cache
+        assert isinstance(self.replay_buffer, OffOnBufferMixin)
+        self._lambda_cache = compute_lambda_returns(
+            self.replay_buffer,
+            self._target_values_and_actions,
+            n_wanted=max(n_samples, self._lambda_samples_per_refresh()),
+            block_size=self.lambda_block_size,
+            gamma=self.gamma,
+            lam=self.mc_prob,
+            qlearning_prob=self.qlearning_prob,
+            cut_is_terminal=self.mc_truncation == "terminal",
+            key=key,
+            env=self._vec_normalize_env,
+        )
+        return self._lambda_cache
+
+    def _lambda_samples_per_refresh(self) -> int:
+        """
+        How many transitions will be trained on from one refresh to the next (with ``train_freq`` in steps; in
+        episodes, this is unknown and one training call's count is used): each refresh computes about as many
+        lambda-returns, so that each is used about once.
+        """
+        if self.train_freq.unit != TrainFrequencyUnit.STEP:
+            return 0
+        steps_per_call = self.train_freq.frequency * self.n_envs
+        if self.lambda_refresh_interval is not None:
+            steps_per_refresh = self.lambda_refresh_interval
+        else:
+            steps_per_refresh = max(self.target_update_interval // self.n_envs, 1) * self.n_envs
+        calls_per_refresh = max(1, math.ceil(steps_per_refresh / steps_per_call))
+        gradient_steps = self.gradient_steps if self.gradient_steps >= 0 else steps_per_call
+        return calls_per_refresh * gradient_steps * self.batch_size
+
+    def _target_values_and_actions(self, observations: np.ndarray | dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        """
+        max_a Q_target(s, a) and its argmax for a batch of (normalised) observations in the buffer's layout, in chunks
+        of at most ``MAX_CHUNK_BYTES`` of float observations, read back to the host once.
+        """
+        first = next(iter(observations.values())) if isinstance(observations, dict) else observations
+        n_observations = len(first)
+        rows_per_chunk = self._steps_per_chunk(1) * 2  # _steps_per_chunk counts observations and next observations
+        values, actions = [], []
+        with th.no_grad():
+            for start in range(0, n_observations, rows_per_chunk):
+                rows = slice(start, start + rows_per_chunk)
+                q_values = self.q_net_target(obs_as_tensor(rows_of(observations, rows), self.device))
+                chunk_values, chunk_actions = q_values.max(dim=1)
+                values.append(chunk_values)
+                actions.append(chunk_actions)
+        if not values:
+            return np.zeros(0, dtype=np.float32), np.zeros(0, dtype=np.int64)
+        # One read-back for both (an action index is exact in float32 up to 2**24 actions)
+        both = th.stack([th.cat(values), th.cat(actions).to(values[0].dtype)]).cpu().numpy()
+        return both[0], both[1].astype(np.int64)
+
+
+def rows_of(value: Any, rows: slice) -> Any:
+    """The rows of a tensor, array or dict of them (views, not copies)."""
+    if isinstance(value, dict):
+        return {key: item[rows] for key, item in value.items()}
+    return value[rows]
