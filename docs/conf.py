@@ -23,7 +23,7 @@ release = version = (ROOT / "sb3_offon" / "version.txt").read_text(encoding="utf
 
 project = "sb3-offon"
 author = "The sb3-offon contributors"
-copyright = "2026, The sb3-offon contributors"  # noqa: A001
+copyright = "2026, The sb3-offon contributors"
 
 extensions = [
     "myst_parser",
