@@ -47,7 +47,8 @@ autosummary_generate = False
 
 html_theme = "sphinx_rtd_theme"
 html_title = f"sb3-offon {release}"
-html_static_path: list[str] = []
+html_static_path = ["_static"]
+html_css_files = ["css/custom.css"]
 html_show_sourcelink = False
 
 # The reports of results/ (no raw runs): Markdown and figures, copied as they are
