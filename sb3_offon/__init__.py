@@ -1,5 +1,7 @@
 """sb3-offon: the Offline-Online DQN of Kim (Symmetry 2020) as a drop-in Stable-Baselines3 algorithm."""
 
+from pathlib import Path
+
 from sb3_offon import envs  # noqa: F401  (registers CartPoleFallPenalty-v1 and MountainCarGoalBonus-v0)
 from sb3_offon.common.buffers import (
     OffOnDictReplayBuffer,
@@ -11,7 +13,8 @@ from sb3_offon.common.buffers import (
 from sb3_offon.offon_dqn import CnnPolicy, MlpPolicy, MultiInputPolicy, OffOnDQN
 from sb3_offon.variants import DQNMC, DQNSarsa
 
-__version__ = "0.1.0"
+# The version is written once, in version.txt (read by setuptools too, see pyproject.toml)
+__version__ = (Path(__file__).parent / "version.txt").read_text(encoding="utf-8").strip()
 
 __all__ = [
     "DQNMC",

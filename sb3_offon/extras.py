@@ -2,8 +2,9 @@
 A one-line error, instead of a traceback, when the command line runs without its optional ``zoo`` dependencies.
 
 ``sb3_offon.train`` and ``sb3_offon.enjoy`` (and their console scripts ``sb3-offon-train``/``sb3-offon-enjoy``, which
-``pip install sb3-offon`` always creates) run through rl-baselines3-zoo, which only ``pip install "sb3-offon[zoo]"``
-brings. This module imports nothing outside the standard library, so that it works precisely when the zoo is missing.
+``pip install sb3-offon`` always creates) run through rl-baselines3-zoo, which only the ``zoo`` extra brings
+(``pip install -e ".[zoo]"`` in a clone, ``pip install "sb3-offon[zoo]"`` from an index). This module imports nothing
+outside the standard library, so that it works precisely when the zoo is missing.
 """
 
 from collections.abc import Iterator
@@ -14,7 +15,9 @@ from contextlib import contextmanager
 # and keeps its traceback.
 ZOO_MODULES = frozenset({"rl_zoo3", "optuna", "requests", "sb3_contrib", "huggingface_sb3", "huggingface_hub"})
 
-INSTALL_HINT = 'pip install "sb3-offon[zoo]"'
+# Both forms: the package is installed from a clone of its source today (pip install -e ".[zoo]" in its folder), and
+# from an index once it is published there
+INSTALL_HINT = 'pip install -e ".[zoo]" in a clone of the source, or pip install "sb3-offon[zoo]"'
 
 
 @contextmanager

@@ -7,13 +7,115 @@ Every flag of ``python -m rl_zoo3.train`` works (``--algo``, ``--env``, ``-n``, 
 ``-conf paper`` selects the paper's settings (see :mod:`sb3_offon.zoo`). String values need no quotes:
 ``--hyperparams mc_mixing:convex sarsa_target:expected`` (see :mod:`sb3_offon.cli_args`).
 
+Two additions to the zoo's command line: ``--help`` opens with the algorithms this package adds (read from
+:data:`sb3_offon.zoo.ALGOS`) and where their settings are documented, and an invalid value of one of OffOnDQN's own
+arguments (``--hyperparams mc_mixing:foo``) ends with one line naming the argument and its allowed values, on stderr
+with exit status 2 as argparse's errors, instead of a traceback.
+
 Example::
 
     python -m sb3_offon.train --algo offon_dqn --env CartPole-v1 --seed 0 -f logs --progress \\
         --eval-freq 10000 --eval-episodes 10 --save-freq 10000
 """
 
+import argparse
+import re
+import sys
+import traceback
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from types import ModuleType, SimpleNamespace
+
 from sb3_offon.extras import zoo_required
+
+PACKAGE_DIR = Path(__file__).resolve().parent
+# OffOnDQN's checks of its own arguments word their errors as "`name` must be ...": the argument's name in backticks
+ARGUMENT_ERROR = re.compile(r"^`(?P<name>\w+)` must be ")
+
+
+def prog() -> str:
+    """The command's name as it was run: the console script's, else ``python -m sb3_offon.train``."""
+    script = Path(sys.argv[0]).name if sys.argv else ""
+    return script if script.startswith("sb3-offon-train") else "python -m sb3_offon.train"
+
+
+def help_description(algos: dict[str, type]) -> str:
+    """
+    The paragraph that opens ``--help``: the ``--algo`` names this package adds, and where they are documented.
+
+    :param algos: the names this package registers and their classes (:data:`sb3_offon.zoo.ALGOS`)
+    :return: the text, lines of at most 100 characters
+    """
+    width = max(len(name) for name in algos) + 2
+    rows = [f"  {name:<{width}}{algo.__module__.partition('.')[0]}.{algo.__name__}" for name, algo in algos.items()]
+    return "\n".join(
+        [
+            "rl-baselines3-zoo's train command, with the algorithms of sb3-offon added to its --algo choices:",
+            *rows,
+            "The zoo's own algorithms (dqn, qrdqn, ppo, ...) work as with python -m rl_zoo3.train.",
+            "",
+            "Settings: without -conf, each added algorithm reads sb3_offon/hyperparams/{algo}.yml (also dqn and",
+            "qrdqn, with the zoo's tuned entries); -conf paper reads the paper's, sb3_offon/hyperparams/paper/.",
+            f"Installed at {PACKAGE_DIR / 'hyperparams'}.",
+            "Off-On parameters (mc_initial_prob, mc_mixing, sarsa_target, ...; set them with --hyperparams",
+            "name:value): the algorithm page of the docs, docs/offon_dqn.md in the source, or",
+            "python -c 'import sb3_offon; help(sb3_offon.OffOnDQN)'. Command line and files: docs/cli.md.",
+        ]
+    )
+
+
+class DescribedArgumentParser(argparse.ArgumentParser):
+    """An ``argparse.ArgumentParser`` whose help opens with :func:`help_description` (before the long usage line)."""
+
+    description_text = ""
+
+    def __init__(self, *args, **kwargs) -> None:  # type: ignore[no-untyped-def]
+        kwargs.setdefault("prog", prog())
+        super().__init__(*args, **kwargs)
+
+    def format_help(self) -> str:
+        """The description as it is written, then argparse's help (usage, options)."""
+        return f"{self.description_text}\n\n{super().format_help()}"
+
+
+def describe_help(module: ModuleType, algos: dict[str, type]) -> None:
+    """
+    Make ``module`` (``rl_zoo3.train``) build its parser with :class:`DescribedArgumentParser`.
+
+    The zoo calls ``argparse.ArgumentParser()`` inside ``train()``: the module's ``argparse`` is replaced by a
+    namespace holding everything of ``argparse`` but this one class.
+
+    :param module: the zoo module whose parser gets the description
+    :param algos: the names to list (read when this is called, so that every registered name appears)
+    """
+    parser_class = type("DescribedArgumentParser", (DescribedArgumentParser,), {"description_text": help_description(algos)})
+    module.argparse = SimpleNamespace(**{**vars(argparse), "ArgumentParser": parser_class})  # type: ignore[attr-defined]
+
+
+def _raised_by_this_package(error: BaseException) -> bool:
+    frames = traceback.extract_tb(error.__traceback__)
+    return bool(frames) and Path(frames[-1].filename).resolve().is_relative_to(PACKAGE_DIR)
+
+
+@contextmanager
+def argument_errors_in_one_line() -> Iterator[None]:
+    """
+    Turn an invalid value of one of OffOnDQN's arguments into one line on stderr and exit status 2 (as argparse).
+
+    Only the errors of the package's own argument checks (a ``ValueError`` raised in this package, worded
+    "`name` must be ..."); every other error keeps its traceback.
+
+    :raises SystemExit: with status 2, after printing the line
+    """
+    try:
+        yield
+    except ValueError as error:
+        match = ARGUMENT_ERROR.match(str(error))
+        if match is None or not _raised_by_this_package(error):
+            raise
+        print(f"{prog()}: error: invalid hyperparameter (--hyperparams or the YAML file): {error}", file=sys.stderr)
+        raise SystemExit(2) from None
 
 
 def main() -> None:
@@ -23,11 +125,13 @@ def main() -> None:
         import rl_zoo3.train as zoo_train
 
         from sb3_offon.cli_args import use_tolerant_store_dict
-        from sb3_offon.zoo import register
+        from sb3_offon.zoo import ALGOS, register
     register()
+    describe_help(zoo_train, ALGOS)
     # ``--hyperparams mc_mixing:convex``: unquoted strings (the zoo alone needs "mc_mixing:'convex'")
     use_tolerant_store_dict()
-    zoo_train.train()
+    with argument_errors_in_one_line():
+        zoo_train.train()
 
 
 if __name__ == "__main__":

@@ -15,9 +15,10 @@ into ``--out`` (default ``results/<set>``):
 - ``table.md``: per env and algorithm, final return, area under the curve and env steps to the solve threshold, each
   a mean over seeds with a 95% CI; the aggregates; the Section 4.4 measures.
 
-With ``--readme README.md``, the same tables also replace the block between ``<!-- results:<set>:start -->`` and
-``<!-- results:<set>:end -->`` in that file (the text outside the markers is left as it is; a file without the markers
-is an error), so that the README's tables are always the ones of ``table.md``.
+With ``--page docs/benchmarks.md`` (the documentation's results page), the same tables also replace the block between
+``<!-- results:<set>:start -->`` and ``<!-- results:<set>:end -->`` in that file (the text outside the markers is left
+as it is; a file without the markers is an error), so that the page's tables are always the ones of ``table.md``.
+``--readme`` is the option's former name, kept as an alias.
 
 Definitions (per run; then mean over seeds with a 95% percentile stratified-bootstrap CI from rliable, seeded):
 
@@ -37,7 +38,7 @@ Definitions (per run; then mean over seeds with a 95% percentile stratified-boot
 
 Usage::
 
-    python scripts/plot.py --root results/raw --set paper --out results/paper --readme README.md
+    python scripts/plot.py --root results/raw --set paper --out results/paper --page docs/benchmarks.md
 """
 
 import argparse
@@ -96,10 +97,13 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--last", type=int, default=3, help="evaluations averaged into the final return (default: 3)")
     parser.add_argument("--reps", type=int, default=2000, help="bootstrap resamples (default: 2000)")
     parser.add_argument(
+        "--page",
         "--readme",
+        dest="page",
         type=Path,
         default=None,
-        help="also write the tables into this file, between <!-- results:<set>:start --> and <!-- results:<set>:end -->",
+        help="also write the tables into this Markdown file (docs/benchmarks.md), between <!-- results:<set>:start --> and"
+        " <!-- results:<set>:end --> (--readme: the former name)",
     )
     args = parser.parse_args(argv)
     args.out = args.out or Path("results") / args.set
@@ -529,12 +533,12 @@ def interval_text(values: tuple[float, float, float], spec: str = ".2f") -> str:
 
 
 def command_text(args: argparse.Namespace) -> str:
-    readme = f" --readme {args.readme}" if args.readme is not None else ""
-    return f"python scripts/plot.py --root {args.root} --set {args.set} --out {args.out}{readme}"
+    page = f" --page {args.page}" if args.page is not None else ""
+    return f"python scripts/plot.py --root {args.root} --set {args.set} --out {args.out}{page}"
 
 
 def table_sections(args: argparse.Namespace, runs: dict, scores: dict, result: dict | None) -> list[tuple[str, list[str]]]:
-    """The tables, as (title, lines): ``table.md``'s sections, and the README's block."""
+    """The tables, as (title, lines): ``table.md``'s sections, and the page's block."""
     lines = [
         "| Env | Algorithm | Seeds | Budget | Final return | AUC | Steps to threshold | Solved |",
         "|---|---|---:|---:|---|---|---|---:|",
@@ -658,27 +662,28 @@ def write_table(args: argparse.Namespace, n_runs: int, sections: list[tuple[str,
     written.append(path)
 
 
-def readme_markers(hyperparams_set: str) -> tuple[str, str]:
+def page_markers(hyperparams_set: str) -> tuple[str, str]:
     return f"<!-- results:{hyperparams_set}:start -->", f"<!-- results:{hyperparams_set}:end -->"
 
 
-def readme_block(args: argparse.Namespace, n_runs: int, sections: list[tuple[str, list[str]]], readme: Path) -> str:
-    """The README's copy of the tables: ``table.md``'s sections under bold titles, not headings of the README's own."""
-    table = Path(os.path.relpath(args.out / "table.md", readme.resolve().parent)).as_posix()
+def page_block(args: argparse.Namespace, n_runs: int, sections: list[tuple[str, list[str]]], page: Path) -> str:
+    """The page's copy of the tables: ``table.md``'s sections under bold titles, not headings of the page's own."""
+    table = Path(os.path.relpath(args.out.resolve() / "table.md", page.resolve().parent)).as_posix()
+    name = (args.out / "table.md").as_posix()  # as the command named it: results/<set>/table.md
     lines = [
         f"<!-- Written by `{command_text(args)}`: edit scripts/plot.py, not this block. -->",
-        f"From {n_runs} runs: means over seeds with 95% stratified-bootstrap CIs; definitions in [{table}]({table}).",
+        f"From {n_runs} runs: means over seeds with 95% stratified-bootstrap CIs; definitions in [{name}]({table}).",
     ]
     for title, body in sections:
         lines += ["", f"**{title}**", "", *body]
     return "\n".join(lines)
 
 
-def check_readme(path: Path, hyperparams_set: str) -> str:
+def check_page(path: Path, hyperparams_set: str) -> str:
     """The text of ``path``, which must hold the set's start and end markers once each, in that order."""
-    start, end = readme_markers(hyperparams_set)
+    start, end = page_markers(hyperparams_set)
     if not path.is_file():
-        raise SystemExit(f"--readme {path}: no such file")
+        raise SystemExit(f"--page {path}: no such file")
     text = path.read_text()
     for marker in (start, end):
         if text.count(marker) != 1:
@@ -689,10 +694,10 @@ def check_readme(path: Path, hyperparams_set: str) -> str:
     return text
 
 
-def replace_readme_block(path: Path, hyperparams_set: str, block: str) -> None:
+def replace_page_block(path: Path, hyperparams_set: str, block: str) -> None:
     """Put ``block`` between the set's two markers of ``path``; the text outside them is kept as it is."""
-    start, end = readme_markers(hyperparams_set)
-    head, rest = check_readme(path, hyperparams_set).split(start)
+    start, end = page_markers(hyperparams_set)
+    head, rest = check_page(path, hyperparams_set).split(start)
     tail = rest.split(end)[1]
     # A blank line before the end marker: a table ends there in every Markdown reader
     path.write_text(f"{head}{start}\n{block}\n\n{end}{tail}")
@@ -703,8 +708,8 @@ def replace_readme_block(path: Path, hyperparams_set: str, block: str) -> None:
 # ----------------------------------------------------------------------------------------------------------------------
 def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
-    if args.readme is not None:
-        check_readme(args.readme, args.set)  # before the work, not after it
+    if args.page is not None:
+        check_page(args.page, args.set)  # before the work, not after it
     runs = load_runs(args.root / args.set)
     if not runs:
         raise SystemExit(f"No finished run under {args.root / args.set}")
@@ -727,9 +732,9 @@ def main(argv: list[str] | None = None) -> None:
     sections = table_sections(args, runs, scores, result)
     n_runs = sum(len(by_seed) for by_algo in runs.values() for by_seed in by_algo.values())
     write_table(args, n_runs, sections, written)
-    if args.readme is not None:
-        replace_readme_block(args.readme, args.set, readme_block(args, n_runs, sections, args.readme))
-        written.append(args.readme)
+    if args.page is not None:
+        replace_page_block(args.page, args.set, page_block(args, n_runs, sections, args.page))
+        written.append(args.page)
     print("Wrote:\n  " + "\n  ".join(str(path) for path in written))
 
 

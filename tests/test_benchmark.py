@@ -197,10 +197,10 @@ def test_plot_writes_every_figure_and_table(local_root: Path, tmp_path: Path):
     # The Section 4.4 tasks, one seed, for Figures 13-16
     check(benchmark(local_root, "--envs", *SECTION_44, "--seeds", "1"))
     out = tmp_path / "figures"
-    readme = tmp_path / "README.md"
-    readme.write_text("# Title\n\n<!-- results:paper:start -->\nold tables\n<!-- results:paper:end -->\n\nAfter.\n")
+    page = tmp_path / "benchmarks.md"
+    page.write_text("# Title\n\n<!-- results:paper:start -->\nold tables\n<!-- results:paper:end -->\n\nAfter.\n")
     command = [sys.executable, str(SCRIPTS / "plot.py"), "--root", str(local_root), "--set", "paper", "--out", str(out)]
-    check(subprocess.run([*command, "--readme", str(readme)], capture_output=True, text=True, timeout=TIMEOUT))
+    check(subprocess.run([*command, "--page", str(page)], capture_output=True, text=True, timeout=TIMEOUT))
     expected = [f"curves_{env}.png" for env in [ENV, *SECTION_44]]
     expected += ["fall_penalty_average.png", "fall_penalty_best.png", "fall_penalty_worst.png", "goal_reaches.png"]
     expected += ["aggregate.png", "table.md"]
@@ -213,8 +213,8 @@ def test_plot_writes_every_figure_and_table(local_root: Path, tmp_path: Path):
             assert sum(f"| {env} (≥" in row and f"| {label} |" in row for row in rows) == 1, (env, label)
     assert "## Across environments (rliable)" in table and "P(improvement over DQN)" in table
     assert "## Section 4.4: CartPoleFallPenalty-v1" in table and "## Section 4.4: MountainCarGoalBonus-v0" in table
-    # --readme: the README's block holds the same tables, the text around it is kept
-    text = readme.read_text()
+    # --page: the page's block holds the same tables, the text around it is kept
+    text = page.read_text()
     assert text.startswith("# Title\n\n<!-- results:paper:start -->\n")
     assert text.endswith("<!-- results:paper:end -->\n\nAfter.\n")
     assert "old tables" not in text and "**Section 4.4: MountainCarGoalBonus-v0**" in text
@@ -226,7 +226,7 @@ def table_rows(text: str) -> list[str]:
     return [line for line in text.splitlines() if line.startswith(("|", "Envs: "))]
 
 
-def readme_with_blocks(*blocks: str) -> str:
+def page_with_blocks(*blocks: str) -> str:
     parts = ["# Project\n\nText before, with a [link](x.md).\n"]
     for name, content in zip(("tuned", "paper"), blocks, strict=False):
         block = f"<!-- results:{name}:start -->\n{content}\n<!-- results:{name}:end -->"
@@ -234,44 +234,45 @@ def readme_with_blocks(*blocks: str) -> str:
     return "".join(parts)
 
 
-def test_plot_readme_block_is_replaced_and_nothing_else(tmp_path: Path):
+def test_plot_page_block_is_replaced_and_nothing_else(tmp_path: Path):
     module = load_script("plot")
-    readme = tmp_path / "README.md"
-    readme.write_text(readme_with_blocks("| old | tuned |\n\nmore old lines", "| paper | block |"))
-    module.replace_readme_block(readme, "tuned", "| new | tuned |")
-    expected = readme_with_blocks("| new | tuned |\n", "| paper | block |")
-    assert readme.read_text() == expected
+    page = tmp_path / "benchmarks.md"
+    page.write_text(page_with_blocks("| old | tuned |\n\nmore old lines", "| paper | block |"))
+    module.replace_page_block(page, "tuned", "| new | tuned |")
+    expected = page_with_blocks("| new | tuned |\n", "| paper | block |")
+    assert page.read_text() == expected
     # Again: the same file (the block's own blank line before the end marker does not pile up)
-    module.replace_readme_block(readme, "tuned", "| new | tuned |")
-    assert readme.read_text() == expected
+    module.replace_page_block(page, "tuned", "| new | tuned |")
+    assert page.read_text() == expected
 
 
-def test_plot_readme_without_markers_is_an_error_naming_the_marker(tmp_path: Path):
+def test_plot_page_without_markers_is_an_error_naming_the_marker(tmp_path: Path):
     module = load_script("plot")
-    readme = tmp_path / "README.md"
-    readme.write_text("# Project\n\nNo markers.\n")
+    page = tmp_path / "benchmarks.md"
+    page.write_text("# Project\n\nNo markers.\n")
     with pytest.raises(SystemExit, match="<!-- results:tuned:start --> is not found"):
-        module.replace_readme_block(readme, "tuned", "| new |")
-    readme.write_text("# Project\n\n<!-- results:tuned:start -->\nno end marker\n")
+        module.replace_page_block(page, "tuned", "| new |")
+    page.write_text("# Project\n\n<!-- results:tuned:start -->\nno end marker\n")
     with pytest.raises(SystemExit, match="<!-- results:tuned:end --> is not found"):
-        module.replace_readme_block(readme, "tuned", "| new |")
-    readme.write_text(readme_with_blocks("a", "b").replace("results:paper", "results:tuned"))
+        module.replace_page_block(page, "tuned", "| new |")
+    page.write_text(page_with_blocks("a", "b").replace("results:paper", "results:tuned"))
     with pytest.raises(SystemExit, match="<!-- results:tuned:start --> is found 2 times"):
-        module.replace_readme_block(readme, "tuned", "| new |")
-    assert "| new |" not in readme.read_text()
-    # The command checks the README before any work: nothing is written
-    readme.write_text("# Project\n")
+        module.replace_page_block(page, "tuned", "| new |")
+    assert "| new |" not in page.read_text()
+    # The command checks the page before any work (--readme, the option's former name): nothing is written
+    page.write_text("# Project\n")
     out = tmp_path / "out"
     with pytest.raises(SystemExit, match="<!-- results:paper:start -->"):
-        module.main(["--root", str(tmp_path / "raw"), "--set", "paper", "--out", str(out), "--readme", str(readme)])
-    assert not out.exists() and readme.read_text() == "# Project\n"
+        module.main(["--root", str(tmp_path / "raw"), "--set", "paper", "--out", str(out), "--readme", str(page)])
+    assert not out.exists() and page.read_text() == "# Project\n"
 
 
 @pytest.mark.parametrize("hyperparams_set", ["paper", "tuned", "headtohead"])
-def test_plot_readme_tables_are_the_results_tables(hyperparams_set: str):
-    # The project's README shows the tables of results/<set>/table.md (python scripts/plot.py ... --readme README.md)
+def test_plot_page_tables_are_the_results_tables(hyperparams_set: str):
+    # The documentation's results page shows the tables of results/<set>/table.md
+    # (python scripts/plot.py ... --page docs/benchmarks.md)
     root = SCRIPTS.parent
-    text = (root / "README.md").read_text()
+    text = (root / "docs" / "benchmarks.md").read_text()
     start, end = f"<!-- results:{hyperparams_set}:start -->", f"<!-- results:{hyperparams_set}:end -->"
     assert start in text and end in text
     block = text.split(start)[1].split(end)[0]

@@ -1,0 +1,72 @@
+"""``python -m sb3_offon.train --help`` names the algorithms this package adds; a bad OffOnDQN argument is one line."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from stable_baselines3 import DQN
+
+from sb3_offon import OffOnDQN
+from sb3_offon.train import argument_errors_in_one_line, help_description
+from sb3_offon.zoo import ALGOS
+
+TIMEOUT = 300
+
+
+def test_help_description_lists_every_registered_name() -> None:
+    # Built from the dict at run time: a name added to ALGOS appears without touching the text
+    text = help_description({**ALGOS, "offon_new": OffOnDQN})
+    rows = {line.split()[0]: line.split()[1] for line in text.splitlines() if line.startswith("  ")}
+    assert list(rows) == [*ALGOS, "offon_new"]
+    assert rows["offon_dqn"] == "sb3_offon.OffOnDQN" and rows["dqn_nstep"] == "stable_baselines3.DQN"
+    assert "docs/offon_dqn.md" in text and "hyperparams" in text
+    assert max(len(line) for line in text.splitlines()) <= 100
+
+
+def test_other_value_errors_keep_their_traceback() -> None:
+    # Raised outside the package (the zoo's, SB3's): not ours to reword
+    with pytest.raises(ValueError, match="must be one of"), argument_errors_in_one_line():
+        raise ValueError("`mc_mixing` must be one of ('a',), got 'b'")
+
+
+def test_argument_error_in_the_package_is_one_line(capsys: pytest.CaptureFixture) -> None:
+    with pytest.raises(SystemExit) as raised, argument_errors_in_one_line():
+        OffOnDQN("MlpPolicy", "CartPole-v1", sarsa_target="nope")
+    assert raised.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "`sarsa_target` must be one of" in err and "'nope'" in err
+
+
+def test_help_and_bad_hyperparameter_on_the_command_line(tmp_path: Path) -> None:
+    commands = {
+        "help": ["--help"],
+        "bad": ["--algo", "offon_dqn", "--env", "CartPole-v1", "-n", "100", "-f", "logs", "--hyperparams", "mc_mixing:foo"],
+    }
+    processes = {
+        name: subprocess.Popen(
+            [sys.executable, "-m", "sb3_offon.train", *arguments],
+            cwd=tmp_path,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for name, arguments in commands.items()
+    }
+    results = {name: (*process.communicate(timeout=TIMEOUT), process.returncode) for name, process in processes.items()}
+
+    out, err, returncode = results["help"]
+    assert returncode == 0, err
+    # The opening paragraph, before argparse's usage, names every added algorithm; the zoo's options follow
+    head, _, rest = out.partition("usage: ")
+    for name in ALGOS:
+        assert f"\n  {name} " in head, name
+    assert "--hyperparams" in rest and "--algo" in rest and "offon_dqn" in rest
+    assert DQN.__name__ in head
+
+    out, err, returncode = results["bad"]
+    assert returncode == 2, (out, err)
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert "`mc_mixing` must be one of ('sample', 'convex'" in lines[0] and "got 'foo'" in lines[0]
+    assert "Traceback" not in err
