@@ -157,6 +157,13 @@ def parse_args() -> argparse.Namespace:
         default=2000,
         help="untimed run of each algorithm before the timed ones (first-call costs of torch and numpy); 0: none",
     )
+    parser.add_argument(
+        "--prefill",
+        type=int,
+        default=0,
+        help="env steps each model collects, untimed and without training, before its timed run (a fuller buffer: "
+        "the lambda mode's refresh reaches its steady size only once the buffer holds more than a refresh computes)",
+    )
     parser.add_argument("--mode", choices=sorted(MODES), default="paper", help="OffOnDQN's targets (default: paper)")
     parser.add_argument(
         "--baseline", choices=sorted(BASELINES), default="dqn", help="SB3's DQN, or its n-step DQN (n = 10) (default: dqn)"
@@ -261,17 +268,24 @@ def run_pair(
     every: int,
     device: str = "cpu",
     extra_kwargs: dict[str, dict] | None = None,
+    prefill: int = 0,
 ) -> dict:
     """
     Build both models (untimed), then run their learn() calls taking turns; one result dict per algorithm.
 
     :param extra_kwargs: per class name (``DQN``, ``OffOnDQN``), constructor arguments of that run only
+    :param prefill: env steps each model collects first, untimed and without training (its timed run continues then)
     """
     names = tuple(algo.__name__ for algo in order)
     baton = Baton(*names)
     models, callbacks = {}, {}
     for name, algo in zip(names, order, strict=True):
         models[name] = build(algo, env_id, hyperparams, seed, device, (extra_kwargs or {}).get(name))
+        if prefill > 0:
+            model = models[name][0]
+            learning_starts, model.learning_starts = model.learning_starts, prefill
+            model.learn(prefill)
+            model.learning_starts = learning_starts
         callbacks[name] = TakeTurns(baton, name, every, rng_states=global_rng_states())
     cpu_seconds = {}
 
@@ -280,7 +294,7 @@ def run_pair(
         callback.take()
         cpu_start = time.thread_time()  # torch runs on this thread (one intra-op thread)
         try:
-            model.learn(total_timesteps=timesteps, callback=callback)
+            model.learn(total_timesteps=timesteps, callback=callback, reset_num_timesteps=prefill == 0)
         finally:
             cpu_seconds[name] = time.thread_time() - cpu_start
             callback.release(finished=True)
@@ -297,7 +311,7 @@ def run_pair(
     runs = {}
     for name in names:
         model, train_seconds = models[name]
-        wall, steps = callbacks[name].held_seconds, model.num_timesteps
+        wall, steps = callbacks[name].held_seconds, model.num_timesteps - prefill  # the timed steps only
         episode_lengths = model.env.env_method("get_episode_lengths")[0]  # from SB3's Monitor wrapper
         runs[name] = {
             "algo": name,
@@ -340,6 +354,7 @@ def markdown_table(result: dict) -> str:
         f"{result['switch_every']} env steps, "
         f"seed {result['seed']}, {result['policy']} on {result['device']} ({result['device_name']}), "
         f"baseline {result.get('baseline', 'dqn')}, OffOnDQN targets {result.get('mode', 'paper')}, "
+        f"prefill {result.get('prefill', 0)} untimed steps, "
         f"{result['threads']} torch thread(s), load average "
         f"{result['loadavg_start'][0]:.2f} at start / {result['loadavg_end'][0]:.2f} at end ({result['cpu_count']} CPUs), "
         f"sb3_offon {result['git']}, SB3 {result['versions']['stable_baselines3']}, torch {result['versions']['torch']}",
@@ -409,6 +424,7 @@ if __name__ == "__main__":
         "baseline": args.baseline,
         "baseline_kwargs": BASELINES[args.baseline],
         "mode": args.mode,
+        "prefill": args.prefill,
         "cpu_count": os.cpu_count(),
         "platform": platform.platform(),
         "processor": platform.processor(),
@@ -450,7 +466,17 @@ if __name__ == "__main__":
         order = (DQN, OffOnDQN) if repeat % 2 == 0 else (OffOnDQN, DQN)
         pair = {"repeat": repeat, "order": f"{order[0].__name__} starts"}
         pair.update(
-            run_pair(order, args.env, hyperparams, args.timesteps, args.seed, args.switch_every, args.device, extra_kwargs)
+            run_pair(
+                order,
+                args.env,
+                hyperparams,
+                args.timesteps,
+                args.seed,
+                args.switch_every,
+                args.device,
+                extra_kwargs,
+                args.prefill,
+            )
         )
         for run in (pair["DQN"], pair["OffOnDQN"]):
             print(
