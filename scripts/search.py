@@ -21,6 +21,17 @@ a candidate earns a test on fresh seeds if, on seeds 0-4, (a) its mean final ret
 on all five tasks, (b) within the same bar of ``nstep10``'s on the four benchmark tasks, and (c) its mean normalised
 AUC over the four benchmark tasks is above ``nstep10``'s. Round 1's winner stays as it was.
 
+Round 3 (issue 27, stated on 2026-11-25 before any of its runs): the lambda-return mode (``mc_mixing="lambda"``,
+``--algo offon_lambda``), delta1 read as lambda and delta2 as the trace-cut weight. Six candidates on the five tasks and
+seeds 0-4 (150 runs): lambda 0.8, 0.9 or 0.95 with Watkins's cuts (delta2 = 1); lambda 0.9 with Peng's (delta2 = 0);
+lambda 0.9 with delta2 rising linearly from 0 (Peng) to 1 (Watkins) over the task's exploration period, so that it
+reaches Watkins when epsilon reaches its final value (a ramp: the schedules are linear, not steps); and the paper's
+delta1 schedule read as lambda, 0.99 -> 0.01 over training, with Watkins's cuts. Criterion: (a) the mean final return
+within round 1's bar of DQN's on all five tasks; (b) among those, the highest mean normalised AUC over the four
+benchmark tasks is the choice; (c) the choice is said to beat n-step DQN on the tuning seeds only if that mean is
+above ``nstep10``'s 0.820. The choice goes to the head-to-head on seeds 20-29 whether or not (c) holds, and (c) is
+reported with it; if no candidate passes (a), none goes, and a further round is stated before its runs.
+
 Runs that the earlier grids already made with the same settings and seeds (the tuned set: DQN, Off-On DQN and DQN with
 MC on the four benchmark tasks) are read from there, not redone. New runs go to
 ``results/raw/search/<candidate>/tuned/<algo>/<env>_<seed>/`` through ``scripts/benchmark.py``'s own functions, so they
@@ -39,6 +50,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import benchmark
@@ -72,7 +84,10 @@ class Candidate:
     # Runs of the tuned grid made with exactly these settings (no overrides): read from there on these envs
     reuse_tuned: bool = False
     description: str = ""
-    # 1: the search as first stated; 2: the round added after the head-to-head (its own criterion, module docstring)
+    # Per task, more overrides (after ``hyperparams``)
+    per_env: dict[str, list[str]] = field(default_factory=dict)
+    # 1: the search as first stated; 2: the round added after the head-to-head; 3: the lambda-returns of issue 27
+    # (each round its own criterion, module docstring)
     round: int = 1
 
 
@@ -112,10 +127,65 @@ CANDIDATES = [
         description="the same on 10-step TD targets",
     ),
 ]
+
+
+def exploration_fractions(algo: str = "offon_lambda") -> dict[str, float]:
+    """Per task, the exploration fraction of the bundled tuned settings (the zoo's), read from ``hyperparams/``."""
+    entries = yaml.safe_load(benchmark.config_file("tuned", algo).read_text())
+    return {env: float(entries[env]["exploration_fraction"]) for env in OFFON_ENVS}
+
+
+def lambda_schedule(initial: float, final: float) -> list[str]:
+    """delta1 read as lambda: from ``initial`` to ``final`` over the whole training (constant where they are equal)."""
+    return [f"mc_initial_prob:{initial}", f"mc_final_prob:{final}", "mc_fraction:1.0"]
+
+
+def trace_cuts(initial: float, final: float) -> list[str]:
+    """delta2, the trace-cut weight: 1 is Watkins's Q(lambda), 0 Peng's."""
+    return [f"qlearning_initial_prob:{initial}", f"qlearning_final_prob:{final}"]
+
+
+# Round 3: the lambda-returns (issue 27); offon_lambda's YAML gives every other setting
+WATKINS, PENG = trace_cuts(1.0, 1.0), trace_cuts(0.0, 0.0)
+CANDIDATES += [
+    *[
+        Candidate(
+            f"lambda{round(lam * 100)}_watkins",
+            "offon_lambda",
+            [*lambda_schedule(lam, lam), *WATKINS],
+            round=3,
+            description=f"lambda {lam}, Watkins's cuts (delta2 = 1)",
+        )
+        for lam in (0.8, 0.9, 0.95)
+    ],
+    Candidate(
+        "lambda90_peng",
+        "offon_lambda",
+        [*lambda_schedule(0.9, 0.9), *PENG],
+        round=3,
+        description="lambda 0.9, Peng's (no cuts, delta2 = 0)",
+    ),
+    Candidate(
+        "lambda90_peng_to_watkins",
+        "offon_lambda",
+        [*lambda_schedule(0.9, 0.9), *trace_cuts(0.0, 1.0)],
+        per_env={env: [f"qlearning_fraction:{fraction}"] for env, fraction in exploration_fractions().items()},
+        round=3,
+        description="lambda 0.9, delta2 0 -> 1 over the exploration period (Peng to Watkins as epsilon decays)",
+    ),
+    Candidate(
+        "lambda_paper_watkins",
+        "offon_lambda",
+        [*lambda_schedule(0.99, 0.01), *WATKINS],
+        round=3,
+        description="lambda 0.99 -> 0.01 over training (the paper's delta1), Watkins's cuts",
+    ),
+]
 BY_NAME = {candidate.name: candidate for candidate in CANDIDATES}
 OFFON_CANDIDATES = [candidate.name for candidate in CANDIDATES if candidate.algo != "dqn_nstep" and candidate.round == 1]
 ROUND2_CANDIDATES = [candidate.name for candidate in CANDIDATES if candidate.round == 2]
 ROUND2_REFERENCE = "nstep10"
+ROUND3_CANDIDATES = [candidate.name for candidate in CANDIDATES if candidate.round == 3]
 
 
 def candidate_root(candidate: Candidate, env: str, search_root: Path = SEARCH_ROOT) -> Path:
@@ -134,8 +204,9 @@ def specs_of(
         # One "a-a" range per seed: benchmark.py reads a lone number as a count of seeds
         argv = ["--set", "tuned", "--algos", candidate.algo, "--envs", env, "--seeds", *(f"{seed}-{seed}" for seed in seeds)]
         argv += ["--eval-episodes", str(EVAL_EPISODES.get(env, 10)), "--device", device]
-        if candidate.hyperparams:
-            argv += ["--hyperparams", *candidate.hyperparams]
+        overrides = [*candidate.hyperparams, *candidate.per_env.get(env, [])]
+        if overrides:
+            argv += ["--hyperparams", *overrides]
         root = candidate_root(candidate, env, search_root)
         pairs += [(spec, root) for spec in benchmark.build_specs(benchmark.parse_args(argv))]
     return pairs
@@ -240,7 +311,7 @@ def bar_verdict(eligible: bool, complete: bool) -> str:
 def report(args: argparse.Namespace) -> int:
     scores = {name: {env: collect(BY_NAME[name], env, args.search_root) for env in BY_NAME[name].envs} for name in BY_NAME}
     lines = [
-        "# Search of issue 13: every candidate on the tuning seeds 0-4",
+        "# Searches of issues 13 and 27: every candidate on the tuning seeds 0-4",
         "",
         "Generated by `python scripts/search.py report` from the finished runs. Final return: mean of the last 3 "
         "evaluations; AUC: mean evaluation return over training (trapezoid); both averaged over the finished seeds "
@@ -286,6 +357,7 @@ def report(args: argparse.Namespace) -> int:
     else:
         lines.append(f"**Winner: pending** ({len(ranking)} of {len(OFFON_CANDIDATES)} Off-On candidates complete)")
     lines += round2_lines(scores, dqn_final)
+    lines += round3_lines(scores, dqn_final)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text("\n".join(lines) + "\n")
@@ -297,13 +369,13 @@ def round2_lines(scores: dict[str, dict[str, np.ndarray]], dqn_final: dict[str, 
     """The round-2 table and verdicts: each candidate against DQN's bar (five tasks) and nstep10's (the four)."""
     reference = scores[ROUND2_REFERENCE]
     reference_final = mean_finals(reference, BENCHMARK_ENVS)
-    reference_auc = [normalise(env, reference[env][:, 1].mean()) for env in BENCHMARK_ENVS if len(reference[env])]
+    reference_auc = reference_mean_auc(scores)
     lines = [
         "",
         "## Round 2: observed-return lower bounds, against n-step DQN",
         "",
         f"Reference: {ROUND2_REFERENCE}, mean normalised AUC over the four benchmark tasks "
-        + (f"{np.mean(reference_auc):.3f}." if len(reference_auc) == len(BENCHMARK_ENVS) else "pending."),
+        + (f"{reference_auc:.3f}." if not np.isnan(reference_auc) else "pending."),
         "",
         "| Candidate | Settings | "
         + " | ".join(f"{env} final / AUC (n)" for env in OFFON_ENVS)
@@ -313,11 +385,61 @@ def round2_lines(scores: dict[str, dict[str, np.ndarray]], dqn_final: dict[str, 
     references = {env: [dqn_final[env]] + ([reference_final[env]] if env in BENCHMARK_ENVS else []) for env in OFFON_ENVS}
     for name in ROUND2_CANDIDATES:
         cells, mean_auc, eligible, complete = candidate_row(scores[name], references, auc_envs=BENCHMARK_ENVS)
-        beats_reference = len(reference_auc) == len(BENCHMARK_ENVS) and mean_auc > np.mean(reference_auc)
+        beats_reference = bool(mean_auc > reference_auc)  # False while the reference is pending (NaN)
         within = bar_verdict(eligible, complete)
         verdict = ("yes" if eligible and beats_reference else "no") if complete else within
         settings = BY_NAME[name].description
         lines.append(f"| {name} | {settings} | " + " | ".join(cells) + f" | {mean_auc:.3f} | {within} | {verdict} |")
+    return lines
+
+
+def reference_mean_auc(scores: dict[str, dict[str, np.ndarray]]) -> float:
+    """``nstep10``'s mean normalised AUC over the four benchmark tasks (NaN until every task has a finished run)."""
+    reference = scores[ROUND2_REFERENCE]
+    if not all(len(reference[env]) for env in BENCHMARK_ENVS):
+        return np.nan
+    return float(np.mean([normalise(env, reference[env][:, 1].mean()) for env in BENCHMARK_ENVS]))
+
+
+def round3_lines(scores: dict[str, dict[str, np.ndarray]], dqn_final: dict[str, float]) -> list[str]:
+    """
+    The round-3 table (the lambda-returns of issue 27) and its choice: within round 1's bar of DQN on the five tasks,
+    then the highest mean normalised AUC over the four benchmark tasks, compared with ``nstep10``'s.
+    """
+    reference_auc = reference_mean_auc(scores)
+    lines = [
+        "",
+        "## Round 3: lambda-returns (issue 27)",
+        "",
+        f"Reference: {ROUND2_REFERENCE}, mean normalised AUC over the four benchmark tasks {reference_auc:.3f}.",
+        "",
+        "| Candidate | Settings | "
+        + " | ".join(f"{env} final / AUC (n)" for env in OFFON_ENVS)
+        + " | Mean normalised AUC (4 tasks) | Within the bar of DQN (5) | Above nstep10's AUC |",
+        "|---|---|" + "---|" * len(OFFON_ENVS) + "---|---|---|",
+    ]
+    ranking = []
+    for name in ROUND3_CANDIDATES:
+        cells, mean_auc, eligible, complete = candidate_row(
+            scores[name], {env: [dqn_final[env]] for env in OFFON_ENVS}, auc_envs=BENCHMARK_ENVS
+        )
+        above = ("yes" if mean_auc > reference_auc else "no") if complete else "pending"
+        within = bar_verdict(eligible, complete)
+        settings = BY_NAME[name].description
+        lines.append(f"| {name} | {settings} | " + " | ".join(cells) + f" | {mean_auc:.3f} | {within} | {above} |")
+        if complete:
+            ranking.append((eligible, mean_auc, name))
+    lines.append("")
+    if len(ranking) < len(ROUND3_CANDIDATES):
+        lines.append(f"**Choice: pending** ({len(ranking)} of {len(ROUND3_CANDIDATES)} round-3 candidates complete)")
+        return lines
+    eligible_ranked = sorted((auc, name) for eligible, auc, name in ranking if eligible)
+    if not eligible_ranked:
+        lines.append("**Choice: none** (no candidate within the bar of DQN on all five tasks)")
+        return lines
+    auc, name = eligible_ranked[-1]
+    verdict = "above" if auc > reference_auc else "not above"
+    lines.append(f"**Choice** (the highest mean normalised AUC within the bar): {name}, {auc:.3f}, {verdict} nstep10's")
     return lines
 
 

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 SCRIPTS = Path(__file__).resolve().parents[1] / "scripts"
 ALGOS = ["offon_dqn", "dqn"]
@@ -448,3 +449,59 @@ def test_search_round2_verdict_from_hand_made_scores():
     # Four seeds: not decided while within the bars, decided "no" once below one
     assert verdict(0.0, 0.30, n_seeds=4)[1:] == ["pending", "pending"]
     assert verdict(0.021, 0.30, n_seeds=4)[1:] == ["no", "no"]
+
+
+def test_search_round3_choice_from_hand_made_scores():
+    """Round 3: within DQN's bar on the five tasks, then the highest four-task AUC, compared with nstep10's."""
+    module = load_script("search")
+    tasks = module.OFFON_ENVS
+    span = {env: module.SCORE_RANGES[env][1] - module.SCORE_RANGES[env][0] for env in tasks}
+    middle = {env: sum(module.SCORE_RANGES[env]) / 2 for env in tasks}
+
+    def scores(final_below: float, auc: float, n_seeds: int = 5, env_below: str = "Acrobot-v1") -> dict[str, np.ndarray]:
+        """Every task ends at its midpoint (DQN's final return here) less ``final_below`` of the range on one task."""
+        return {
+            env: np.column_stack(
+                [
+                    np.full(n_seeds, middle[env] - (final_below * span[env] if env == env_below else 0.0)),
+                    np.full(n_seeds, module.SCORE_RANGES[env][0] + auc * span[env]),
+                ]
+            )
+            for env in tasks
+        }
+
+    def lines(candidates: dict[str, dict[str, np.ndarray]]) -> list[str]:
+        everything = {name: scores(0.0, 0.1) for name in module.ROUND3_CANDIDATES} | candidates
+        everything[module.ROUND2_REFERENCE] = scores(0.0, 0.25)  # nstep10's four-task mean: 0.25
+        return module.round3_lines(everything, dict(middle))
+
+    first, second = module.ROUND3_CANDIDATES[:2]
+    # The higher AUC wins among those within the bar; a higher one below the bar on a task is passed over
+    assert lines({first: scores(0.0, 0.30), second: scores(0.021, 0.40)})[-1].startswith("**Choice** (the highest")
+    assert f": {first}, 0.300, above nstep10's" in lines({first: scores(0.0, 0.30), second: scores(0.021, 0.40)})[-1]
+    assert f": {second}, 0.400, above" in lines({first: scores(0.0, 0.30), second: scores(0.02, 0.40)})[-1]
+    # FrozenLake counts for the bar but not for the AUC; a choice below nstep10's AUC is said to be
+    assert f": {second}, 0.200, not above" in lines({second: scores(0.0, 0.20, env_below="FrozenLake-v1")})[-1]
+    passed_over = lines({second: scores(0.021, 0.20, env_below="FrozenLake-v1")})[-1]
+    assert f": {second}," not in passed_over and passed_over.endswith(", 0.100, not above nstep10's")
+    # Nobody within the bar: no choice; a candidate with four seeds: pending
+    below = {name: scores(0.05, 0.3) for name in module.ROUND3_CANDIDATES}
+    assert lines(below)[-1].startswith("**Choice: none**")
+    assert lines({first: scores(0.0, 0.3, n_seeds=4)})[-1].startswith("**Choice: pending** (5 of 6")
+    row = next(line for line in lines({first: scores(0.0, 0.3, n_seeds=4)}) if line.startswith(f"| {first} |"))
+    assert row.rstrip(" |").split(" | ")[-2:] == ["pending", "pending"]
+
+
+def test_search_round3_cuts_ramp_over_each_tasks_exploration_period(tmp_path: Path):
+    """Peng to Watkins: delta2 reaches 1 when epsilon reaches its final value, task by task (the zoo's fractions)."""
+    module = load_script("search")
+    candidate = module.BY_NAME["lambda90_peng_to_watkins"]
+    for env in module.OFFON_ENVS:
+        entry = yaml.safe_load((Path(__file__).parents[1] / "hyperparams" / "offon_lambda.yml").read_text())[env]
+        (spec, root), *_ = module.specs_of(candidate, [env], [0], "cpu", tmp_path)
+        assert spec["algo"] == "offon_lambda" and root == tmp_path / candidate.name
+        assert spec["hyperparams"][-3:] == [
+            "qlearning_initial_prob:0.0",
+            "qlearning_final_prob:1.0",
+            f"qlearning_fraction:{float(entry['exploration_fraction'])}",
+        ]
