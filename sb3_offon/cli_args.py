@@ -8,7 +8,8 @@ defined``. :class:`TolerantStoreDict` is the zoo's action with two additions, ap
 - a value that is a bare word (a Python identifier) and that the zoo cannot evaluate (``NameError``) is that word as a
   string: ``mc_mixing:convex`` gives ``"convex"``;
 - a bare word that is one of the string choices of our algorithms' options (:data:`STRING_OPTIONS`) is that string
-  even when it evaluates: ``mc_mixing:max`` gives ``"max"``, where the zoo would give Python's builtin ``max``.
+  even when it evaluates or is a Python keyword: ``mc_mixing:max`` gives ``"max"``, where the zoo would give Python's
+  builtin ``max``, and ``mc_mixing:lambda`` gives ``"lambda"``, where the zoo's ``eval`` would fail.
 
 Everything else is evaluated by the zoo itself, as before: numbers, lists, dicts, ``"dict(net_arch=[64])"``, quoted
 strings (``"'lin_1e-3'"``), names the zoo knows (``True``, ``nn.ReLU``, ...), and the errors of what does not evaluate.
@@ -62,18 +63,22 @@ class TolerantStoreDict(StoreDict):
         # Split as the zoo does: the key ends at the first colon
         key, separator, value = argument.partition(":")
         word = value.strip()
-        # True, False, None (keywords) and anything that is not a single name are left to the zoo
-        if not separator or not word.isidentifier() or keyword.iskeyword(word):
+        # Anything that is not a single name is left to the zoo
+        if not separator or not word.isidentifier():
             return argument
-        if word not in STRING_OPTIONS.get(key, ()):
-            try:
-                # The zoo's own evaluation of this one pair, in its own namespace, so that a name it knows (``th``,
-                # ``nn``, a builtin, ...) keeps its meaning. Evaluating a bare name has no side effect
-                StoreDict.__call__(self, parser, argparse.Namespace(), [argument])
-                return argument
-            except NameError:
-                pass
-        return f"{key}:{word!r}"
+        # One of our string choices, even a builtin's name (max) or a keyword (lambda)
+        if word in STRING_OPTIONS.get(key, ()):
+            return f"{key}:{word!r}"
+        # True, False, None and the other keywords are left to the zoo
+        if keyword.iskeyword(word):
+            return argument
+        try:
+            # The zoo's own evaluation of this one pair, in its own namespace, so that a name it knows (``th``, ``nn``,
+            # a builtin, ...) keeps its meaning. Evaluating a bare name has no side effect
+            StoreDict.__call__(self, parser, argparse.Namespace(), [argument])
+            return argument
+        except NameError:
+            return f"{key}:{word!r}"
 
 
 def use_tolerant_store_dict(modules: Sequence[ModuleType] = (zoo_train, zoo_enjoy)) -> None:

@@ -47,7 +47,7 @@ def test_zoo_alone_fails_on_bare_words() -> None:
 
 @pytest.mark.parametrize("key", sorted(STRING_OPTIONS))
 def test_every_string_option(key: str) -> None:
-    # "max" included: evaluated, it would be Python's builtin max
+    # "max" included: evaluated, it would be Python's builtin max; "lambda" too: a keyword, which eval cannot take alone
     for option in STRING_OPTIONS[key]:
         assert parse(f"{key}:{option}") == {key: option}
 
