@@ -5,11 +5,13 @@ import pytest
 import torch as th
 from gymnasium import spaces
 from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.envs import FakeImageEnv
 from stable_baselines3.common.logger import KVWriter, Logger
 from stable_baselines3.common.vec_env import VecNormalize
 
 from sb3_offon import OffOnDQN, OffOnReplayBuffer
 from sb3_offon.common.buffers import discounted_returns
+from sb3_offon.offon_dqn import lambda_training
 from sb3_offon.offon_dqn.lambda_returns import backward_recurrence, choose_blocks, compute_lambda_returns
 
 OBS_SPACE = spaces.Box(-np.inf, np.inf, shape=(1,), dtype=np.float32)
@@ -440,3 +442,26 @@ def test_optimize_memory_usage_model_matches_the_formula():
     cache = model._refreshed_lambda_cache(10**6)
     assert model.replay_buffer.pos not in cache.slots
     assert_matches_reference(cache, reference_lambda_returns(model.replay_buffer, model_target(model), model.gamma, 0.9, 1.0))
+
+
+def test_the_refresh_pass_in_chunks_matches_one_pass(monkeypatch):
+    model = OffOnDQN("MlpPolicy", "CartPole-v1", seed=0, buffer_size=1000, **SMALL, **LAMBDA)
+    model.learn(200)
+    assert model._lambda_forward_rows() == lambda_training.LAMBDA_FORWARD_ROWS  # 16-byte observations: the rows bound
+    observations = model.replay_buffer.next_observations[:150, 0]
+    monkeypatch.setattr(lambda_training, "LAMBDA_FORWARD_ROWS", 7)  # 22 chunks, the last one of 3 rows
+    assert model._lambda_forward_rows() == 7
+    values, actions = model._target_values_and_actions(observations)
+    with th.no_grad():
+        q_values = model.q_net_target(th.as_tensor(observations))
+    np.testing.assert_allclose(values, q_values.max(dim=1).values.numpy(), rtol=1e-6)
+    np.testing.assert_array_equal(actions, q_values.argmax(dim=1).numpy())
+    assert values.shape == actions.shape == (150,)
+
+
+def test_the_refresh_pass_keeps_image_chunks_small():
+    # 4 stacked 84x84 frames are 112,896 bytes as float32: 74 of them fit in LAMBDA_FORWARD_BYTES (8 MiB)
+    env = FakeImageEnv(screen_height=84, screen_width=84, n_channels=4, discrete=True, channel_first=True)
+    model = OffOnDQN("CnnPolicy", env, buffer_size=100, **LAMBDA)
+    assert model._observation_bytes() == 4 * 4 * 84 * 84
+    assert model._lambda_forward_rows() == lambda_training.LAMBDA_FORWARD_BYTES // (4 * 4 * 84 * 84) == 74

@@ -20,8 +20,10 @@ from stable_baselines3.dqn.policies import QNetwork
 from sb3_offon.common.buffers import OffOnBufferMixin
 from sb3_offon.offon_dqn.lambda_returns import LambdaReturnCache, compute_lambda_returns
 
-# The most next observations the refresh runs through the target network at once (see _target_values_and_actions)
+# The most next observations the refresh runs through the target network at once, in rows and in bytes of float32
+# observations (see _lambda_forward_rows)
 LAMBDA_FORWARD_ROWS = 1024
+LAMBDA_FORWARD_BYTES = 8 * 2**20
 
 
 class LambdaTrainingMixin:
@@ -57,6 +59,7 @@ class LambdaTrainingMixin:
     _lambda_cache: LambdaReturnCache | None
     _update_learning_rate: Callable[..., None]
     _steps_per_chunk: Callable[[int], int]
+    _observation_bytes: Callable[[], int]
     _to_device: Callable[[np.ndarray], th.Tensor]
     _loss_fn: Callable[[], Callable[[th.Tensor, th.Tensor], th.Tensor]]
 
@@ -158,14 +161,11 @@ class LambdaTrainingMixin:
     def _target_values_and_actions(self, observations: np.ndarray | dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         """
         max_a Q_target(s, a) and its argmax for a batch of (normalised) observations in the buffer's layout, in chunks
-        of at most ``MAX_CHUNK_BYTES`` of float observations, read back to the host once.
+        of :meth:`_lambda_forward_rows` rows, read back to the host once.
         """
         first = next(iter(observations.values())) if isinstance(observations, dict) else observations
         n_observations = len(first)
-        # _steps_per_chunk(1) counts an observation and a next observation: twice that many rows of observations alone.
-        # At most LAMBDA_FORWARD_ROWS at once: on a CPU, 32,000 rows through a 256-256 MLP at once took 1.5x as long as
-        # in chunks of 1,024, whose activations stay in the cache
-        rows_per_chunk = min(LAMBDA_FORWARD_ROWS, self._steps_per_chunk(1) * 2)
+        rows_per_chunk = self._lambda_forward_rows()
         values, actions = [], []
         with th.no_grad():
             for start in range(0, n_observations, rows_per_chunk):
@@ -179,6 +179,17 @@ class LambdaTrainingMixin:
         # One read-back for both (an action index is exact in float32 up to 2**24 actions)
         both = th.stack([th.cat(values), th.cat(actions).to(values[0].dtype)]).cpu().numpy()
         return both[0], both[1].astype(np.int64)
+
+    def _lambda_forward_rows(self) -> int:
+        """
+        How many next observations the refresh runs through the target network at once: at most
+        ``LAMBDA_FORWARD_ROWS``, and at most ``LAMBDA_FORWARD_BYTES`` of float32 observations.
+
+        Larger chunks are slower on a CPU once their activations leave the cache: 32,000 rows through a 256-256 MLP at
+        once took 1.5x as long as in chunks of 1,024; NatureCNN on 4x84x84 frames (one thread) took 247 us a row in
+        chunks of 594 (64 MiB of floats) and 177-188 us in chunks of 48-128 (the bytes bound gives 74).
+        """
+        return max(1, min(LAMBDA_FORWARD_ROWS, LAMBDA_FORWARD_BYTES // max(self._observation_bytes(), 1)))
 
 
 def rows_of(value: Any, rows: slice) -> Any:

@@ -543,13 +543,17 @@ class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, DQN):
         their observations and next observations, as float32 in the networks, would take more than
         ``MAX_CHUNK_BYTES`` (1,000 gradient steps on Atari frames would be some 7 GB).
         """
+        sample_bytes = 2 * self._observation_bytes()
+        return max(1, MAX_CHUNK_BYTES // (batch_size * max(sample_bytes, 1)))
+
+    def _observation_bytes(self) -> int:
+        """The bytes of one observation as float32 in the networks (every key of a Dict observation)."""
         observation_spaces: list[spaces.Space] = (
             list(self.observation_space.spaces.values())
             if isinstance(self.observation_space, spaces.Dict)
             else [self.observation_space]
         )
-        sample_bytes = 2 * 4 * sum(math.prod(space.shape or (1,)) for space in observation_spaces)
-        return max(1, MAX_CHUNK_BYTES // (batch_size * max(sample_bytes, 1)))
+        return 4 * sum(math.prod(space.shape or (1,)) for space in observation_spaces)
 
     def _to_device(self, array: np.ndarray) -> th.Tensor:
         # from_numpy then to(): a few times cheaper than as_tensor(..., device=...) for a small array on the CPU
