@@ -105,6 +105,7 @@ LAMBDA_TARGETS = dict(
 MODES = {"paper": {}, "lambda": LAMBDA_TARGETS}
 # --baseline dqn_nstep: SB3's n-step DQN as in the head-to-heads (hyperparams/dqn_nstep.yml uses n = 10 on every task)
 BASELINES = {"dqn": {}, "dqn_nstep": dict(n_steps=10)}
+BASELINE_NAMES = {"dqn": "SB3's DQN", "dqn_nstep": "SB3's DQN with n_steps=10 (n-step DQN)"}
 ZOO_TIMESTEPS = {"CartPole-v1": 50_000, "LunarLander-v3": 100_000, ATARI_SHAPED: 10_000_000}
 POLICIES = {"CartPole-v1": "MlpPolicy", "LunarLander-v3": "MlpPolicy", ATARI_SHAPED: "CnnPolicy"}
 
@@ -359,6 +360,11 @@ def markdown_table(result: dict) -> str:
         f"{result['loadavg_start'][0]:.2f} at start / {result['loadavg_end'][0]:.2f} at end ({result['cpu_count']} CPUs), "
         f"sb3_offon {result['git']}, SB3 {result['versions']['stable_baselines3']}, torch {result['versions']['torch']}",
         "",
+        *(
+            [f"The DQN columns and rows are the baseline's: {BASELINE_NAMES[result['baseline']]}.", ""]
+            if result.get("baseline", "dqn") != "dqn"
+            else []
+        ),
         "| pair | order | DQN steps/s | OffOnDQN steps/s | ratio | DQN CPU steps/s | OffOnDQN CPU steps/s | CPU ratio |",
         "|---:|---|---:|---:|---:|---:|---:|---:|",
     ]

@@ -7,6 +7,7 @@ and that each run's timers nest (its training time is part of its learn() time).
 
 import hashlib
 import importlib.util
+import json
 from pathlib import Path
 
 import numpy as np
@@ -79,3 +80,14 @@ def test_baton_alternates_and_lets_the_survivor_run_on():
     assert baton.holder == "a"
     baton.hand_over("a")
     assert baton.holder == "a", "the other run has finished: nobody to wait for"
+
+
+@pytest.mark.parametrize("name", ["cartpole", "lambda_lunarlander", "lambda_lunarlander_vs_nstep"])
+def test_tables_say_which_baseline_the_dqn_columns_are(name):
+    """The tables' "DQN" columns are n-step DQN's with ``--baseline dqn_nstep``: the table says so, and only then."""
+    module = load_script()
+    result = json.loads((SCRIPT.parents[1] / "results" / "speed" / f"{name}.json").read_text())
+    table = module.markdown_table(result)
+    said = "The DQN columns and rows are the baseline's: SB3's DQN with n_steps=10 (n-step DQN)." in table.splitlines()
+    assert said == (result.get("baseline", "dqn") == "dqn_nstep")
+    assert table.splitlines()[4 if said else 2].startswith("| pair | order | DQN steps/s |")
