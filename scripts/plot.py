@@ -70,6 +70,8 @@ LABELS = {
     "dqn_nstep": "n-step DQN",
     "qrdqn": "QR-DQN",
     "offon_choice": "Off-On DQN (search's choice)",
+    "offon_lambda": "Off-On λ",
+    "offon_lambda_choice": "Off-On λ (search's choice)",
 }
 COLORS = {
     "offon_dqn": "tab:red",
@@ -79,6 +81,8 @@ COLORS = {
     "dqn_nstep": "tab:purple",
     "qrdqn": "tab:brown",
     "offon_choice": "tab:pink",
+    "offon_lambda": "tab:olive",
+    "offon_lambda_choice": "tab:cyan",
 }
 BASELINE = "dqn"
 THRESHOLDS = {"CartPole-v1": 475.0, "MountainCar-v0": -110.0, "LunarLander-v3": 200.0, "Acrobot-v1": -100.0}

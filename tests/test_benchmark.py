@@ -505,3 +505,70 @@ def test_search_round3_cuts_ramp_over_each_tasks_exploration_period(tmp_path: Pa
             "qlearning_final_prob:1.0",
             f"qlearning_fraction:{float(entry['exploration_fraction'])}",
         ]
+
+
+def test_headtohead2_rule_from_hand_made_scores():
+    """Issue 27's rule: final return not below DQN's by the interval anywhere, and the IQM of normalised AUC above n-step's."""
+    module = load_script("headtohead2_rule")
+    envs = ["CartPole-v1", "MountainCar-v0", "LunarLander-v3", "Acrobot-v1"]
+    seeds = np.arange(20, 30)
+    spread = np.arange(10.0) - 4.5  # mean 0 over the ten seeds
+
+    def grid(final_shift: dict[str, float], auc: dict[str, float], steps: float = 50.0, n_seeds: int = 10) -> tuple:
+        """Each algorithm's final return = spread (+ the choice's shift), AUC = its level + spread; DQN takes 100 steps."""
+        runs, scores = {}, {}
+        for env in envs:
+            for algo in module.ALGOS:
+                kept = 9 if (algo == "qrdqn" and env == "Acrobot-v1" and n_seeds == 9) else 10
+                shift = final_shift[env] if algo == module.CHOICE else 0.0
+                runs.setdefault(env, {})[algo] = [
+                    module.plot.Run(algo, env, int(seed), 100, np.array([100]), np.array([0.0]), None) for seed in seeds[:kept]
+                ]
+                scores.setdefault(env, {})[algo] = {
+                    "final": spread[:kept] + shift,
+                    "auc": spread[:kept] / 10 + auc[algo],
+                    "steps": np.full(kept, steps if algo == module.CHOICE else 100.0),
+                }
+        return runs, scores
+
+    level = {"dqn": 0.0, "qrdqn": 1.0, "dqn_nstep": 5.0, module.CHOICE: 10.0}
+    even = dict.fromkeys(envs, 0.0)
+    verdict, lines = module.judge(*grid(even, level), reps=300)
+    assert verdict == "holds", lines
+    assert (
+        lines[0].startswith("CartPole-v1 (10 vs 10 seeds): final return minus DQN's +0.0 [")
+        and "-> not below zero" in lines[0]
+    )
+    assert lines[-5].endswith("4 of 4 tasks (all needed)") and lines[-4].endswith("yes")
+    assert lines[-3].endswith("met"), "AUC 10 against 5 with a spread of 0.9: the intervals are apart"
+    assert lines[-2].endswith("missed (above on 0)") and lines[-1].endswith("met (4 of 4)")
+
+    # Far enough below DQN on one task that the interval of the difference lies below zero: the rule fails
+    verdict, lines = module.judge(*grid(dict(even, **{"Acrobot-v1": -20.0}), level), reps=300)
+    assert verdict == "does not hold" and lines[3].split(" -> ")[1].startswith("BELOW zero"), lines
+    # Above by the interval on two tasks: that target is met; steps at 0.8x DQN's miss theirs
+    verdict, lines = module.judge(
+        *grid(dict(even, **{"CartPole-v1": 20.0, "MountainCar-v0": 20.0}), level, steps=80.0), reps=300
+    )
+    assert verdict == "holds" and lines[-2].endswith("met (above on 2)") and lines[-1].endswith("missed (0 of 4)"), lines
+    # Slower than n-step DQN across the tasks: the rule fails on its second part
+    verdict, lines = module.judge(*grid(even, dict(level, **{module.CHOICE: 4.0})), reps=300)
+    assert verdict == "does not hold" and lines[-4].endswith("no") and lines[-3].endswith("missed"), lines
+    # A cell with nine seeds: no decision yet, and the aggregate waits
+    verdict, lines = module.judge(*grid(even, level, n_seeds=9), reps=300)
+    assert verdict == "incomplete" and "still to run: qrdqn" in lines[3] and "waits until" in lines[4], lines
+
+
+def test_headtohead2_rule_counts_only_the_fresh_seeds(tmp_path: Path):
+    """Runs on seeds outside 20-29 (a tuning seed, the first head-to-head's) are not read."""
+    module = load_script("headtohead2_rule")
+    for seed in (4, 19, 20, 29, 30):
+        folder = tmp_path / "headtohead2" / "dqn" / f"CartPole-v1_{seed}"
+        folder.mkdir(parents=True)
+        spec = {"algo": "dqn", "env": "CartPole-v1", "seed": seed, "n_timesteps": 200}
+        (folder / "done.json").write_text(json.dumps({"spec": spec, "returncode": 0, "n_evaluations": 2}))
+        np.savez(folder / "evaluations.npz", timesteps=np.array([100, 200]), results=np.full((2, 5), float(seed)))
+        (folder / "0.monitor.csv").write_text('#{"t_start": 0}\nr,l,t\n10.0,10,0.1\n')
+    runs, scores = module.load(tmp_path / "headtohead2")
+    assert [run.seed for run in runs["CartPole-v1"]["dqn"]] == [20, 29]
+    np.testing.assert_array_equal(scores["CartPole-v1"]["dqn"]["final"], [20.0, 29.0])
