@@ -27,8 +27,6 @@ import argparse
 import sys
 from pathlib import Path
 
-import numpy as np
-
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import plot
 from search import BENCHMARK_ENVS
@@ -38,20 +36,6 @@ ALGOS = (BASELINE, NSTEP, "qrdqn", CHOICE)
 FRESH_SEEDS = range(20, 30)
 STEPS_RATIO_AT_MOST = 0.7
 FINAL_ABOVE_AT_LEAST = 2
-
-
-def load(folder: Path, last: int = 3) -> tuple[dict, dict]:
-    """``runs[env][algo]`` and ``scores[env][algo]`` of the four algorithms on the fresh seeds (other seeds do not count)."""
-    runs: dict[str, dict[str, list[plot.Run]]] = {}
-    scores: dict[str, dict[str, dict[str, np.ndarray]]] = {}
-    for env, by_algo in plot.load_runs(folder).items():
-        for algo in ALGOS:
-            fresh = [run for run in by_algo.get(algo, []) if run.seed in FRESH_SEEDS]
-            if fresh:
-                grid, curves = plot.evaluation_curves(fresh)
-                runs.setdefault(env, {})[algo] = fresh
-                scores.setdefault(env, {})[algo] = plot.run_scores(fresh, grid, curves, last, plot.threshold(env))
-    return runs, scores
 
 
 def judge(runs: dict, scores: dict, reps: int) -> tuple[str, list[str]]:
@@ -127,7 +111,7 @@ def main(argv: list[str] | None = None) -> str:
     parser.add_argument("--set", default="headtohead2", help="the grid's folder under --root (default: headtohead2)")
     parser.add_argument("--reps", type=int, default=2000, help="bootstrap resamples (default: 2000, as plot.py)")
     args = parser.parse_args(argv)
-    runs, scores = load(args.root / args.set)
+    runs, scores = plot.scores_on_seeds(args.root / args.set, ALGOS, FRESH_SEEDS)
     verdict, lines = judge(runs, scores, args.reps)
     print("\n".join(lines))
     print(f"Verdict: {verdict}")

@@ -35,11 +35,6 @@ SEEDS = len(FRESH_SEEDS)
 AUC_APART_AT_LEAST = 3
 
 
-def fresh_runs(runs: list[plot.Run]) -> list[plot.Run]:
-    """The runs on the head-to-head's fresh seeds: a run on another seed (a tuning seed, say) does not count."""
-    return [run for run in runs if run.seed in FRESH_SEEDS]
-
-
 def judge(scores: dict[str, dict[str, dict[str, np.ndarray]]], reps: int) -> tuple[str, list[str]]:
     """
     The verdict and one line per task, from ``scores[env][algo]["final" | "auc"]`` (one value per seed).
@@ -86,13 +81,7 @@ def main(argv: list[str] | None = None) -> str:
     parser.add_argument("--set", default="headtohead", help="the grid's folder under --root (default: headtohead)")
     parser.add_argument("--reps", type=int, default=2000, help="bootstrap resamples (default: 2000, as plot.py)")
     args = parser.parse_args(argv)
-    scores: dict[str, dict[str, dict[str, np.ndarray]]] = {}
-    for env, by_algo in plot.load_runs(args.root / args.set).items():
-        for algo in (BASELINE, CHOICE):
-            runs = fresh_runs(by_algo.get(algo, []))
-            if runs:
-                grid, curves = plot.evaluation_curves(runs)
-                scores.setdefault(env, {})[algo] = plot.run_scores(runs, grid, curves, 3, plot.threshold(env))
+    _, scores = plot.scores_on_seeds(args.root / args.set, (BASELINE, CHOICE), FRESH_SEEDS)
     verdict, lines = judge(scores, args.reps)
     print("\n".join(lines))
     print(f"Verdict: {verdict}")

@@ -168,6 +168,23 @@ def load_runs(folder: Path) -> dict[str, dict[str, list[Run]]]:
     }
 
 
+def scores_on_seeds(folder: Path, algos: tuple[str, ...], seeds: range, last: int = 3) -> tuple[dict, dict]:
+    """
+    ``runs[env][algo]`` and ``scores[env][algo]`` (``run_scores``'s fields) of the finished runs of ``algos`` on ``seeds``
+    only: a head-to-head's rule reads its fresh seeds and nothing else.
+    """
+    runs: dict[str, dict[str, list[Run]]] = {}
+    scores: dict[str, dict[str, dict[str, np.ndarray]]] = {}
+    for env, by_algo in load_runs(folder).items():
+        for algo in algos:
+            kept = [run for run in by_algo.get(algo, []) if run.seed in seeds]
+            if kept:
+                grid, curves = evaluation_curves(kept)
+                runs.setdefault(env, {})[algo] = kept
+                scores.setdefault(env, {})[algo] = run_scores(kept, grid, curves, last, threshold(env))
+    return runs, scores
+
+
 def algo_order(algo: str) -> tuple[int, str]:
     return (ALGOS.index(algo) if algo in ALGOS else len(ALGOS), algo)
 

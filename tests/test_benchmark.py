@@ -385,12 +385,6 @@ def test_aggregate_waits_for_an_env_until_every_variant_has_its_seeds():
     assert complete["envs"] == ["A", "B"] and complete["left_out"] == {} and complete["runs"] == {"dqn": 3, "qrdqn": 3}
 
 
-def test_headtohead_rule_counts_only_the_fresh_seeds():
-    module = load_script("headtohead_rule")
-    runs = [module.plot.Run("dqn", "CartPole-v1", seed, 100, np.array([100]), np.array([0.0]), None) for seed in range(25)]
-    assert [run.seed for run in module.fresh_runs(runs)] == list(range(10, 20))
-
-
 def test_bootstrap_intervals_are_the_same_at_every_redraw():
     module = load_script("plot")
     values = np.random.default_rng(0).normal(size=(10, 5))
@@ -559,16 +553,17 @@ def test_headtohead2_rule_from_hand_made_scores():
     assert verdict == "incomplete" and "still to run: qrdqn" in lines[3] and "waits until" in lines[4], lines
 
 
-def test_headtohead2_rule_counts_only_the_fresh_seeds(tmp_path: Path):
-    """Runs on seeds outside 20-29 (a tuning seed, the first head-to-head's) are not read."""
-    module = load_script("headtohead2_rule")
-    for seed in (4, 19, 20, 29, 30):
-        folder = tmp_path / "headtohead2" / "dqn" / f"CartPole-v1_{seed}"
+@pytest.mark.parametrize("rule, fresh", [("headtohead_rule", [10, 19]), ("headtohead2_rule", [20, 29])])
+def test_headtohead_rules_count_only_their_fresh_seeds(tmp_path: Path, rule: str, fresh: list[int]):
+    """Runs on other seeds (a tuning seed, the other head-to-head's) are not read by a head-to-head's rule."""
+    module = load_script(rule)
+    for seed in (4, 9, 10, 19, 20, 29, 30):
+        folder = tmp_path / "grid" / "dqn" / f"CartPole-v1_{seed}"
         folder.mkdir(parents=True)
         spec = {"algo": "dqn", "env": "CartPole-v1", "seed": seed, "n_timesteps": 200}
         (folder / "done.json").write_text(json.dumps({"spec": spec, "returncode": 0, "n_evaluations": 2}))
         np.savez(folder / "evaluations.npz", timesteps=np.array([100, 200]), results=np.full((2, 5), float(seed)))
         (folder / "0.monitor.csv").write_text('#{"t_start": 0}\nr,l,t\n10.0,10,0.1\n')
-    runs, scores = module.load(tmp_path / "headtohead2")
-    assert [run.seed for run in runs["CartPole-v1"]["dqn"]] == [20, 29]
-    np.testing.assert_array_equal(scores["CartPole-v1"]["dqn"]["final"], [20.0, 29.0])
+    runs, scores = module.plot.scores_on_seeds(tmp_path / "grid", ("dqn",), module.FRESH_SEEDS)
+    assert [run.seed for run in runs["CartPole-v1"]["dqn"]] == fresh
+    np.testing.assert_array_equal(scores["CartPole-v1"]["dqn"]["final"], np.array(fresh, dtype=float))
