@@ -304,8 +304,11 @@ def mean_finals(scores: dict[str, np.ndarray], envs: list[str]) -> dict[str, flo
 
 
 def bar_verdict(eligible: bool, complete: bool) -> str:
-    """Within the bars: "yes"/"no" once every seed finished; "no" as soon as a task is below, else "pending"."""
-    return ("yes" if eligible else "no") if complete else ("no" if not eligible else "pending")
+    """
+    Within the bars: "yes"/"no" once every seed finished, else "pending" ("below so far" when a task's mean over the
+    finished seeds is below: a seed still to come can lift it, so that is not yet a "no").
+    """
+    return ("yes" if eligible else "no") if complete else ("pending" if eligible else "pending (below so far)")
 
 
 def report(args: argparse.Namespace) -> int:

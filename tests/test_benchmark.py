@@ -440,9 +440,9 @@ def test_search_round2_verdict_from_hand_made_scores():
     assert verdict(0.0, 0.25)[1:] == ["yes", "no"]
     # FrozenLake is held to DQN's bar alone, and its AUC is not in the four-task mean
     assert verdict(0.021, 0.30, env_below="FrozenLake-v1")[1:] == ["no", "no"]
-    # Four seeds: not decided while within the bars, decided "no" once below one
+    # Four seeds: not decided, within the bars or below one (the fifth seed can still lift a mean over the bar)
     assert verdict(0.0, 0.30, n_seeds=4)[1:] == ["pending", "pending"]
-    assert verdict(0.021, 0.30, n_seeds=4)[1:] == ["no", "no"]
+    assert verdict(0.021, 0.30, n_seeds=4)[1:] == ["pending (below so far)", "pending (below so far)"]
 
 
 def test_search_round3_choice_from_hand_made_scores():
