@@ -73,6 +73,10 @@ SCORE_RANGES = {
 }
 # "Never below DQN": a mean final return at most this share of the task's range below DQN's
 TOLERANCE = 0.02
+# The highest return an episode can have, where the task bounds it: CartPole's 500-step limit at +1 a step, FrozenLake's
+# one reward of 1. A candidate whose mean final return stays below a bar even if every missing seed ended there cannot
+# reach that bar (its seeds still to come cannot change the choice, so they may run after the others')
+SCORE_CEILINGS = {"CartPole-v1": 500.0, "FrozenLake-v1": 1.0}
 
 
 @dataclass
@@ -303,6 +307,25 @@ def mean_finals(scores: dict[str, np.ndarray], envs: list[str]) -> dict[str, flo
     return {env: scores[env][:, 0].mean() if len(scores[env]) else np.nan for env in envs}
 
 
+def cannot_reach_bar(scores: dict[str, np.ndarray], references: dict[str, list[float]]) -> list[str]:
+    """
+    The tasks of ``OFFON_ENVS`` on which a candidate's mean final return over the tuning seeds would stay below the bar
+    of some reference even if every seed still missing ended at the task's ceiling (``SCORE_CEILINGS``; tasks without
+    one are never listed while a seed is missing). A finished task is listed when its mean is below the bar.
+    """
+    below = []
+    for env in OFFON_ENVS:
+        finals = scores[env][:, 0] if len(scores[env]) else np.zeros(0)
+        missing = len(TUNING_SEEDS) - len(finals)
+        if missing and env not in SCORE_CEILINGS:
+            continue
+        best_mean = (finals.sum() + missing * SCORE_CEILINGS.get(env, 0.0)) / len(TUNING_SEEDS)
+        low, high = SCORE_RANGES[env]
+        if any(best_mean < reference - TOLERANCE * (high - low) for reference in references[env]):
+            below.append(env)
+    return below
+
+
 def bar_verdict(eligible: bool, complete: bool) -> str:
     """
     Within the bars: "yes"/"no" once every seed finished, else "pending" ("below so far" when a task's mean over the
@@ -407,7 +430,8 @@ def reference_mean_auc(scores: dict[str, dict[str, np.ndarray]]) -> float:
 def round3_lines(scores: dict[str, dict[str, np.ndarray]], dqn_final: dict[str, float]) -> list[str]:
     """
     The round-3 table (the lambda-returns of issue 27) and its choice: within round 1's bar of DQN on the five tasks,
-    then the highest mean normalised AUC over the four benchmark tasks, compared with ``nstep10``'s.
+    then the highest mean normalised AUC over the four benchmark tasks, compared with ``nstep10``'s. The choice is made
+    once every candidate is complete or cannot reach a bar whatever its missing seeds score (:func:`cannot_reach_bar`).
     """
     reference_auc = reference_mean_auc(scores)
     lines = [
@@ -422,19 +446,19 @@ def round3_lines(scores: dict[str, dict[str, np.ndarray]], dqn_final: dict[str, 
         "|---|---|" + "---|" * len(OFFON_ENVS) + "---|---|---|",
     ]
     ranking = []
+    references = {env: [dqn_final[env]] for env in OFFON_ENVS}
     for name in ROUND3_CANDIDATES:
-        cells, mean_auc, eligible, complete = candidate_row(
-            scores[name], {env: [dqn_final[env]] for env in OFFON_ENVS}, auc_envs=BENCHMARK_ENVS
-        )
+        cells, mean_auc, eligible, complete = candidate_row(scores[name], references, auc_envs=BENCHMARK_ENVS)
+        out_of_reach = [] if complete else cannot_reach_bar(scores[name], references)
         above = ("yes" if mean_auc > reference_auc else "no") if complete else "pending"
-        within = bar_verdict(eligible, complete)
+        within = f"no: cannot reach it on {', '.join(out_of_reach)}" if out_of_reach else bar_verdict(eligible, complete)
         settings = BY_NAME[name].description
         lines.append(f"| {name} | {settings} | " + " | ".join(cells) + f" | {mean_auc:.3f} | {within} | {above} |")
-        if complete:
-            ranking.append((eligible, mean_auc, name))
+        if complete or out_of_reach:
+            ranking.append((eligible and complete, mean_auc, name))
     lines.append("")
     if len(ranking) < len(ROUND3_CANDIDATES):
-        lines.append(f"**Choice: pending** ({len(ranking)} of {len(ROUND3_CANDIDATES)} round-3 candidates complete)")
+        lines.append(f"**Choice: pending** ({len(ranking)} of {len(ROUND3_CANDIDATES)} round-3 candidates decided)")
         return lines
     eligible_ranked = sorted((auc, name) for eligible, auc, name in ranking if eligible)
     if not eligible_ranked:

@@ -486,6 +486,38 @@ def test_search_round3_choice_from_hand_made_scores():
     assert row.rstrip(" |").split(" | ")[-2:] == ["pending", "pending"]
 
 
+def test_search_round3_decides_without_the_seeds_that_cannot_change_the_choice():
+    """A candidate whose CartPole mean stays below DQN's bar even at 500 on every missing seed is out before its end."""
+    module = load_script("search")
+    tasks = module.OFFON_ENVS
+    middle = {env: sum(module.SCORE_RANGES[env]) / 2 for env in tasks}  # DQN's final returns; CartPole's bar: 240
+
+    def scores(cartpole_finals: list[float], n_seeds: int = 5, auc: float = 0.3) -> dict[str, np.ndarray]:
+        rows = {env: np.column_stack([np.full(n_seeds, middle[env]), np.full(n_seeds, middle[env])]) for env in tasks}
+        rows["CartPole-v1"] = np.column_stack([cartpole_finals, np.full(len(cartpole_finals), auc * 500)])
+        return rows
+
+    def lines(candidates: dict[str, dict[str, np.ndarray]]) -> list[str]:
+        everything = {name: scores([250.0] * 5, auc=0.1) for name in module.ROUND3_CANDIDATES} | candidates
+        everything[module.ROUND2_REFERENCE] = scores([250.0] * 5, auc=0.25)
+        return module.round3_lines(everything, dict(middle))
+
+    def verdict(name: str, table: list[str]) -> str:
+        return next(line for line in table if line.startswith(f"| {name} |")).rstrip(" |").split(" | ")[-2]
+
+    first, second = module.ROUND3_CANDIDATES[:2]
+    # Three seeds summing to 0: (0 + 2 x 500) / 5 = 200 < 240, out; summing to 201: (201 + 1000) / 5 = 240.2, still open
+    out = lines({first: scores([0.0, 0.0, 0.0], n_seeds=3, auc=0.9)})
+    assert verdict(first, out) == "no: cannot reach it on CartPole-v1"
+    assert out[-1].startswith("**Choice** (the highest") and f": {first}," not in out[-1]
+    still_open = lines({first: scores([67.0, 67.0, 67.0], n_seeds=3, auc=0.9)})
+    assert verdict(first, still_open) == "pending (below so far)" and still_open[-1].startswith("**Choice: pending** (5 of 6")
+    # A task with no ceiling (MountainCar) missing seeds never decides early, however low its mean so far
+    low_mountaincar = scores([250.0] * 5)
+    low_mountaincar["MountainCar-v0"] = np.array([[-200.0, -200.0]] * 3)
+    assert verdict(second, lines({second: low_mountaincar})) == "pending (below so far)"
+
+
 def test_search_round3_cuts_ramp_over_each_tasks_exploration_period(tmp_path: Path):
     """Peng to Watkins: delta2 reaches 1 when epsilon reaches its final value, task by task (the zoo's fractions)."""
     module = load_script("search")
