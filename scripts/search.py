@@ -278,6 +278,12 @@ def normalise(env: str, value: np.ndarray | float) -> np.ndarray | float:
     return (value - low) / (high - low)
 
 
+def within_bars(env: str, final: float, references: list[float]) -> bool:
+    """Whether a mean final return on ``env`` is at most ``TOLERANCE`` of the task's range below every reference's."""
+    low, high = SCORE_RANGES[env]
+    return all(bool(final >= reference - TOLERANCE * (high - low)) for reference in references)
+
+
 def candidate_row(
     scores: dict[str, np.ndarray], references: dict[str, list[float]], auc_envs: list[str] = OFFON_ENVS
 ) -> tuple[list[str], float, bool, bool]:
@@ -295,8 +301,7 @@ def candidate_row(
             continue
         final, auc = values.mean(axis=0)
         cells.append(f"{final:.3g} / {auc:.3g} ({len(values)})")
-        low, high = SCORE_RANGES[env]
-        eligible &= all(bool(final >= reference - TOLERANCE * (high - low)) for reference in references[env])
+        eligible &= within_bars(env, final, references[env])
         if env in auc_envs:
             normalised_auc.append(normalise(env, auc))
     return cells, float(np.mean(normalised_auc)) if normalised_auc else np.nan, eligible, complete
@@ -320,8 +325,7 @@ def cannot_reach_bar(scores: dict[str, np.ndarray], references: dict[str, list[f
         if missing and env not in SCORE_CEILINGS:
             continue
         best_mean = (finals.sum() + missing * SCORE_CEILINGS.get(env, 0.0)) / len(TUNING_SEEDS)
-        low, high = SCORE_RANGES[env]
-        if any(best_mean < reference - TOLERANCE * (high - low) for reference in references[env]):
+        if not within_bars(env, best_mean, references[env]):
             below.append(env)
     return below
 
