@@ -32,6 +32,15 @@ benchmark tasks is the choice; (c) the choice is said to beat n-step DQN on the 
 above ``nstep10``'s 0.820. The choice goes to the head-to-head on seeds 20-29 whether or not (c) holds, and (c) is
 reported with it; if no candidate passes (a), none goes, and a further round is stated before its runs.
 
+Round 4 (issue 27, stated on 2026-11-25 after round 3 chose none and before any of its runs): three candidates, each
+ending its training nearer one-step Q-learning than round 3's did, since round 3 lost FrozenLake with every lambda, and
+CartPole (Watkins at lambda >= 0.9) or Acrobot (Peng) where lambda stayed high: the paper's delta1 schedule read as
+lambda (0.99 -> 0.01 over training) with Peng's cuts; lambda 0.9 -> 0 over the first half of training with Peng's cuts,
+one-step Q-learning after; lambda 0.7 throughout with Watkins's cuts. The criterion is round 3's, but FrozenLake-v1 is
+judged on ten seeds (0-9), the candidates' and DQN's (DQN's seeds 5-9 made with the settings of its seeds 0-4): on five
+seeds the standard error of DQN's own mean (0.031) exceeded the 0.02 bar. The bar stays 2% of the range below DQN's
+mean; the other four tasks keep seeds 0-4.
+
 Runs that the earlier grids already made with the same settings and seeds (the tuned set: DQN, Off-On DQN and DQN with
 MC on the four benchmark tasks) are read from there, not redone. New runs go to
 ``results/raw/search/<candidate>/tuned/<algo>/<env>_<seed>/`` through ``scripts/benchmark.py``'s own functions, so they
@@ -90,9 +99,14 @@ class Candidate:
     description: str = ""
     # Per task, more overrides (after ``hyperparams``)
     per_env: dict[str, list[str]] = field(default_factory=dict)
-    # 1: the search as first stated; 2: the round added after the head-to-head; 3: the lambda-returns of issue 27
+    # 1: the search as first stated; 2: the round added after the head-to-head; 3 and 4: the lambda-returns of issue 27
     # (each round its own criterion, module docstring)
     round: int = 1
+    # Per task, the seeds it is judged on where they are not the tuning seeds 0-4
+    seeds: dict[str, list[int]] = field(default_factory=dict)
+
+    def seeds_on(self, env: str) -> list[int]:
+        return self.seeds.get(env, TUNING_SEEDS)
 
 
 MAX = "mc_mixing:'max'"
@@ -139,9 +153,12 @@ def exploration_fractions(algo: str = "offon_lambda") -> dict[str, float]:
     return {env: float(entries[env]["exploration_fraction"]) for env in OFFON_ENVS}
 
 
-def lambda_schedule(initial: float, final: float) -> list[str]:
-    """delta1 read as lambda: from ``initial`` to ``final`` over the whole training (constant where they are equal)."""
-    return [f"mc_initial_prob:{initial}", f"mc_final_prob:{final}", "mc_fraction:1.0"]
+def lambda_schedule(initial: float, final: float, fraction: float = 1.0) -> list[str]:
+    """
+    delta1 read as lambda: from ``initial`` to ``final`` over ``fraction`` of the training, then ``final`` (constant
+    where they are equal).
+    """
+    return [f"mc_initial_prob:{initial}", f"mc_final_prob:{final}", f"mc_fraction:{fraction}"]
 
 
 def trace_cuts(initial: float, final: float) -> list[str]:
@@ -185,11 +202,40 @@ CANDIDATES += [
         description="lambda 0.99 -> 0.01 over training (the paper's delta1), Watkins's cuts",
     ),
 ]
+# Round 4: lambda-returns that end nearer one-step Q-learning; FrozenLake judged on ten seeds (module docstring)
+ROUND4_SEEDS = {STOCHASTIC_ENV: list(range(10))}
+CANDIDATES += [
+    Candidate(
+        "lambda_paper_peng",
+        "offon_lambda",
+        [*lambda_schedule(0.99, 0.01), *PENG],
+        round=4,
+        seeds=ROUND4_SEEDS,
+        description="lambda 0.99 -> 0.01 over training (the paper's delta1), Peng's (no cuts)",
+    ),
+    Candidate(
+        "lambda90_peng_half",
+        "offon_lambda",
+        [*lambda_schedule(0.9, 0.0, fraction=0.5), *PENG],
+        round=4,
+        seeds=ROUND4_SEEDS,
+        description="lambda 0.9 -> 0 over the first half of training, Peng's (no cuts); one-step Q-learning after",
+    ),
+    Candidate(
+        "lambda70_watkins",
+        "offon_lambda",
+        [*lambda_schedule(0.7, 0.7), *WATKINS],
+        round=4,
+        seeds=ROUND4_SEEDS,
+        description="lambda 0.7, Watkins's cuts (delta2 = 1)",
+    ),
+]
 BY_NAME = {candidate.name: candidate for candidate in CANDIDATES}
 OFFON_CANDIDATES = [candidate.name for candidate in CANDIDATES if candidate.algo != "dqn_nstep" and candidate.round == 1]
 ROUND2_CANDIDATES = [candidate.name for candidate in CANDIDATES if candidate.round == 2]
 ROUND2_REFERENCE = "nstep10"
 ROUND3_CANDIDATES = [candidate.name for candidate in CANDIDATES if candidate.round == 3]
+ROUND4_CANDIDATES = [candidate.name for candidate in CANDIDATES if candidate.round == 4]
 
 
 def candidate_root(candidate: Candidate, env: str, search_root: Path = SEARCH_ROOT) -> Path:
@@ -220,8 +266,9 @@ def run(args: argparse.Namespace) -> int:
     pairs = []
     for name in args.candidates:
         candidate = BY_NAME[name]
-        envs = [env for env in candidate.envs if env in args.envs]
-        pairs += specs_of(candidate, envs, args.seeds, args.device, args.search_root)
+        for env in (env for env in candidate.envs if env in args.envs):
+            seeds = args.seeds if args.seeds is not None else candidate.seeds_on(env)
+            pairs += specs_of(candidate, [env], seeds, args.device, args.search_root)
     todo, conflicts = [], []
     for spec, root in pairs:
         status = benchmark.run_status(benchmark.run_dir(root, spec), spec)
@@ -262,10 +309,10 @@ def run_scores(folder: Path, last: int = 3) -> tuple[float, float] | None:
     return float(returns[-last:].mean()), float(auc)
 
 
-def collect(candidate: Candidate, env: str, search_root: Path = SEARCH_ROOT) -> np.ndarray:
-    """(seeds, 2): final return and AUC of each finished tuning-seed run (fewer rows while runs are missing)."""
+def collect(candidate: Candidate, env: str, search_root: Path = SEARCH_ROOT, seeds: list[int] = TUNING_SEEDS) -> np.ndarray:
+    """(seeds, 2): final return and AUC of each finished run of ``seeds`` (fewer rows while runs are missing)."""
     rows = []
-    for seed in TUNING_SEEDS:
+    for seed in seeds:
         folder = candidate_root(candidate, env, search_root) / "tuned" / candidate.algo / f"{env}_{seed}"
         scores = run_scores(folder)
         if scores is not None:
@@ -285,17 +332,20 @@ def within_bars(env: str, final: float, references: list[float]) -> bool:
 
 
 def candidate_row(
-    scores: dict[str, np.ndarray], references: dict[str, list[float]], auc_envs: list[str] = OFFON_ENVS
+    scores: dict[str, np.ndarray],
+    references: dict[str, list[float]],
+    auc_envs: list[str] = OFFON_ENVS,
+    n_seeds: dict[str, int] | None = None,
 ) -> tuple[list[str], float, bool, bool]:
     """
     A candidate's cells (final / AUC (seeds) per task of ``OFFON_ENVS``), its mean normalised AUC over ``auc_envs``,
     whether its mean final return is within the bar (``TOLERANCE`` of the range) of every reference final return of
-    each finished task, and whether every task has all the tuning seeds.
+    each finished task, and whether every task has all its seeds (``n_seeds`` per task, else the tuning seeds).
     """
     cells, normalised_auc, eligible, complete = [], [], True, True
     for env in OFFON_ENVS:
         values = scores[env]
-        complete &= len(values) == len(TUNING_SEEDS)
+        complete &= len(values) == seed_count(env, n_seeds)
         if not len(values):
             cells.append("—")
             continue
@@ -307,24 +357,32 @@ def candidate_row(
     return cells, float(np.mean(normalised_auc)) if normalised_auc else np.nan, eligible, complete
 
 
+def seed_count(env: str, n_seeds: dict[str, int] | None) -> int:
+    """How many seeds a task is judged on: ``n_seeds[env]`` where given, else the tuning seeds'."""
+    return (n_seeds or {}).get(env, len(TUNING_SEEDS))
+
+
 def mean_finals(scores: dict[str, np.ndarray], envs: list[str]) -> dict[str, float]:
     """Per task, the mean final return over the finished seeds (NaN where none finished)."""
     return {env: scores[env][:, 0].mean() if len(scores[env]) else np.nan for env in envs}
 
 
-def cannot_reach_bar(scores: dict[str, np.ndarray], references: dict[str, list[float]]) -> list[str]:
+def cannot_reach_bar(
+    scores: dict[str, np.ndarray], references: dict[str, list[float]], n_seeds: dict[str, int] | None = None
+) -> list[str]:
     """
-    The tasks of ``OFFON_ENVS`` on which a candidate's mean final return over the tuning seeds would stay below the bar
-    of some reference even if every seed still missing ended at the task's ceiling (``SCORE_CEILINGS``; tasks without
-    one are never listed while a seed is missing). A finished task is listed when its mean is below the bar.
+    The tasks of ``OFFON_ENVS`` on which a candidate's mean final return over its seeds (``n_seeds`` per task, else the
+    tuning seeds) would stay below the bar of some reference even if every seed still missing ended at the task's
+    ceiling (``SCORE_CEILINGS``; tasks without one are never listed while a seed is missing). A finished task is listed
+    when its mean is below the bar; a task whose reference is not known yet (NaN) never is.
     """
     below = []
     for env in OFFON_ENVS:
         finals = scores[env][:, 0] if len(scores[env]) else np.zeros(0)
-        missing = len(TUNING_SEEDS) - len(finals)
-        if missing and env not in SCORE_CEILINGS:
+        missing = seed_count(env, n_seeds) - len(finals)
+        if (missing and env not in SCORE_CEILINGS) or np.isnan(references[env]).any():
             continue
-        best_mean = (finals.sum() + missing * SCORE_CEILINGS.get(env, 0.0)) / len(TUNING_SEEDS)
+        best_mean = (finals.sum() + missing * SCORE_CEILINGS.get(env, 0.0)) / seed_count(env, n_seeds)
         if not within_bars(env, best_mean, references[env]):
             below.append(env)
     return below
@@ -388,6 +446,15 @@ def report(args: argparse.Namespace) -> int:
         lines.append(f"**Winner: pending** ({len(ranking)} of {len(OFFON_CANDIDATES)} Off-On candidates complete)")
     lines += round2_lines(scores, dqn_final)
     lines += round3_lines(scores, dqn_final)
+    # Round 4 judges FrozenLake on more seeds, DQN's reference included
+    round4_scores = {
+        name: {env: collect(BY_NAME[name], env, args.search_root, ROUND4_SEEDS.get(env, TUNING_SEEDS)) for env in OFFON_ENVS}
+        for name in ["dqn", *ROUND4_CANDIDATES]
+    }
+    round4_scores[ROUND2_REFERENCE] = scores[ROUND2_REFERENCE]
+    dqn_round4 = {env: mean_finals(round4_scores["dqn"], [env])[env] for env in OFFON_ENVS}
+    dqn_round4 |= {env: np.nan for env, seeds in ROUND4_SEEDS.items() if len(round4_scores["dqn"][env]) < len(seeds)}
+    lines += round4_lines(round4_scores, dqn_round4)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text("\n".join(lines) + "\n")
@@ -432,15 +499,37 @@ def reference_mean_auc(scores: dict[str, dict[str, np.ndarray]]) -> float:
 
 
 def round3_lines(scores: dict[str, dict[str, np.ndarray]], dqn_final: dict[str, float]) -> list[str]:
+    """The round-3 table (the lambda-returns of issue 27) and its choice (:func:`lambda_round_lines`)."""
+    return lambda_round_lines(scores, dqn_final, ROUND3_CANDIDATES, "## Round 3: lambda-returns (issue 27)")
+
+
+def round4_lines(scores: dict[str, dict[str, np.ndarray]], dqn_final: dict[str, float]) -> list[str]:
     """
-    The round-3 table (the lambda-returns of issue 27) and its choice: within round 1's bar of DQN on the five tasks,
-    then the highest mean normalised AUC over the four benchmark tasks, compared with ``nstep10``'s. The choice is made
-    once every candidate is complete or cannot reach a bar whatever its missing seeds score (:func:`cannot_reach_bar`).
+    The round-4 table and its choice: round 3's criterion, with FrozenLake-v1 judged on the ten seeds of
+    ``ROUND4_SEEDS``, the candidates' and DQN's (``scores`` and ``dqn_final`` hold those seeds there).
+    """
+    title = "## Round 4: lambda-returns that end nearer one-step Q-learning (issue 27; FrozenLake-v1 on seeds 0-9)"
+    n_seeds = {env: len(seeds) for env, seeds in ROUND4_SEEDS.items()}
+    return lambda_round_lines(scores, dqn_final, ROUND4_CANDIDATES, title, n_seeds)
+
+
+def lambda_round_lines(
+    scores: dict[str, dict[str, np.ndarray]],
+    dqn_final: dict[str, float],
+    names: list[str],
+    title: str,
+    n_seeds: dict[str, int] | None = None,
+) -> list[str]:
+    """
+    A round of lambda-return candidates ``names`` and its choice: within round 1's bar of DQN's final return
+    (``dqn_final``) on the five tasks, then the highest mean normalised AUC over the four benchmark tasks, compared with
+    ``nstep10``'s. The choice is made once every candidate is complete (``n_seeds`` per task, else the tuning seeds) or
+    cannot reach a bar whatever its missing seeds score (:func:`cannot_reach_bar`), and DQN's references are known.
     """
     reference_auc = reference_mean_auc(scores)
     lines = [
         "",
-        "## Round 3: lambda-returns (issue 27)",
+        title,
         "",
         f"Reference: {ROUND2_REFERENCE}, mean normalised AUC over the four benchmark tasks {reference_auc:.3f}.",
         "",
@@ -451,9 +540,9 @@ def round3_lines(scores: dict[str, dict[str, np.ndarray]], dqn_final: dict[str, 
     ]
     ranking = []
     references = {env: [dqn_final[env]] for env in OFFON_ENVS}
-    for name in ROUND3_CANDIDATES:
-        cells, mean_auc, eligible, complete = candidate_row(scores[name], references, auc_envs=BENCHMARK_ENVS)
-        out_of_reach = [] if complete else cannot_reach_bar(scores[name], references)
+    for name in names:
+        cells, mean_auc, eligible, complete = candidate_row(scores[name], references, BENCHMARK_ENVS, n_seeds)
+        out_of_reach = [] if complete else cannot_reach_bar(scores[name], references, n_seeds)
         above = ("yes" if mean_auc > reference_auc else "no") if complete else "pending"
         within = f"no: cannot reach it on {', '.join(out_of_reach)}" if out_of_reach else bar_verdict(eligible, complete)
         settings = BY_NAME[name].description
@@ -461,8 +550,12 @@ def round3_lines(scores: dict[str, dict[str, np.ndarray]], dqn_final: dict[str, 
         if complete or out_of_reach:
             ranking.append((eligible and complete, mean_auc, name))
     lines.append("")
-    if len(ranking) < len(ROUND3_CANDIDATES):
-        lines.append(f"**Choice: pending** ({len(ranking)} of {len(ROUND3_CANDIDATES)} round-3 candidates decided)")
+    unknown = [env for env in OFFON_ENVS if np.isnan(dqn_final[env])]
+    if unknown:
+        lines.append(f"**Choice: pending** (DQN's reference not finished on {', '.join(unknown)})")
+        return lines
+    if len(ranking) < len(names):
+        lines.append(f"**Choice: pending** ({len(ranking)} of {len(names)} candidates decided)")
         return lines
     eligible_ranked = sorted((auc, name) for eligible, auc, name in ranking if eligible)
     if not eligible_ranked:
@@ -480,7 +573,9 @@ def main(argv: list[str] | None = None) -> int:
     run_parser = commands.add_parser("run", help="train the missing runs of the search")
     run_parser.add_argument("--candidates", nargs="+", default=list(BY_NAME), choices=list(BY_NAME))
     run_parser.add_argument("--envs", nargs="+", default=OFFON_ENVS)
-    run_parser.add_argument("--seeds", nargs="+", type=int, default=TUNING_SEEDS)
+    run_parser.add_argument(
+        "--seeds", nargs="+", type=int, default=None, help="these seeds on every task (default: each candidate's own)"
+    )
     run_parser.add_argument("--workers", type=int, default=2)
     run_parser.add_argument("--device", default="cpu")
     run_parser.add_argument("--search-root", type=Path, default=SEARCH_ROOT, help="where new runs go")

@@ -533,6 +533,71 @@ def test_search_round3_cuts_ramp_over_each_tasks_exploration_period(tmp_path: Pa
         ]
 
 
+def test_search_round4_runs_frozenlake_on_ten_seeds(tmp_path: Path, capsys: pytest.CaptureFixture):
+    """Round 4: seeds 0-9 on FrozenLake-v1, 0-4 elsewhere, unless ``--seeds`` says otherwise; its settings as stated."""
+    module = load_script("search")
+    args = ["run", "--candidates", "lambda90_peng_half", "--search-root", str(tmp_path), "--dry-run"]
+    assert module.main(args) == 0
+    listed = [line.split()[0] for line in capsys.readouterr().out.splitlines()[1:]]
+    expected = [f"FrozenLake-v1_{seed}" for seed in range(10)] + [f"CartPole-v1_{seed}" for seed in range(5)]
+    assert sorted(Path(folder).name for folder in listed if "FrozenLake" in folder or "CartPole" in folder) == sorted(expected)
+    assert len(listed) == 4 * 5 + 10
+    assert module.main([*args, "--seeds", "7"]) == 0
+    assert [Path(line.split()[0]).name for line in capsys.readouterr().out.splitlines()[1:]] == [
+        f"{env}_7" for env in module.OFFON_ENVS
+    ]
+    (spec, _), *_ = module.specs_of(module.BY_NAME["lambda90_peng_half"], ["Acrobot-v1"], [0], "cpu", tmp_path)
+    assert spec["hyperparams"] == [
+        "mc_initial_prob:0.9",
+        "mc_final_prob:0.0",
+        "mc_fraction:0.5",
+        "qlearning_initial_prob:0.0",
+        "qlearning_final_prob:0.0",
+    ]
+    assert module.BY_NAME["lambda_paper_peng"].hyperparams[:2] == ["mc_initial_prob:0.99", "mc_final_prob:0.01"]
+    assert module.BY_NAME["lambda70_watkins"].hyperparams[-2:] == ["qlearning_initial_prob:1.0", "qlearning_final_prob:1.0"]
+
+
+def test_search_round4_judges_frozenlake_on_ten_seeds():
+    """Round 4: a FrozenLake mean over ten seeds against DQN's over ten; five seeds are not done, nor is DQN's reference."""
+    module = load_script("search")
+    tasks = module.OFFON_ENVS
+    middle = {env: sum(module.SCORE_RANGES[env]) / 2 for env in tasks}  # DQN's final returns; FrozenLake's bar: 0.48
+
+    def scores(frozenlake_finals: list[float], auc: float = 0.3) -> dict[str, np.ndarray]:
+        rows = {env: np.column_stack([np.full(5, middle[env]), np.full(5, middle[env])]) for env in tasks}
+        for env in module.BENCHMARK_ENVS:
+            low, high = module.SCORE_RANGES[env]
+            rows[env][:, 1] = low + auc * (high - low)
+        rows["FrozenLake-v1"] = np.column_stack([frozenlake_finals, frozenlake_finals])
+        return rows
+
+    def lines(candidates: dict[str, dict[str, np.ndarray]], dqn: dict[str, float] = middle) -> list[str]:
+        everything = {name: scores([0.5] * 10, auc=0.1) for name in module.ROUND4_CANDIDATES} | candidates
+        everything[module.ROUND2_REFERENCE] = scores([0.5] * 5, auc=0.25)
+        return module.round4_lines(everything, dict(dqn))
+
+    def verdict(name: str, table: list[str]) -> str:
+        return next(line for line in table if line.startswith(f"| {name} |")).rstrip(" |").split(" | ")[-2]
+
+    first, second = module.ROUND4_CANDIDATES[:2]
+    # Ten seeds averaging 0.485 pass (bar 0.48); averaging 0.475 do not
+    passing = lines({first: scores([0.4, 0.57] * 5, auc=0.3)})
+    assert verdict(first, passing) == "yes" and passing[-1].endswith(f": {first}, 0.300, above nstep10's")
+    failing = lines({first: scores([0.4, 0.55] * 5, auc=0.3)})
+    assert verdict(first, failing) == "no" and f": {first}," not in failing[-1]
+    # Five FrozenLake seeds of ten: pending, however good; below the bar even at 1.0 on the other five: out
+    assert verdict(second, lines({second: scores([0.9] * 5)})) == "pending"
+    assert lines({second: scores([0.9] * 5)})[-1].startswith("**Choice: pending** (2 of 3 candidates decided)")
+    # (0 x 5 + 1.0 x 5) / 10 = 0.5 can still reach 0.48; (0 x 6 + 1.0 x 4) / 10 = 0.4 cannot
+    assert verdict(second, lines({second: scores([0.0] * 5)})) == "pending (below so far)"
+    assert verdict(second, lines({second: scores([0.0] * 6)})) == "no: cannot reach it on FrozenLake-v1"
+    # Until DQN's ten FrozenLake seeds are done, nothing is decided on that task, and no choice is made
+    pending_reference = lines({second: scores([0.0] * 6)}, dqn=middle | {"FrozenLake-v1": np.nan})
+    assert verdict(second, pending_reference) == "pending (below so far)"
+    assert pending_reference[-1] == "**Choice: pending** (DQN's reference not finished on FrozenLake-v1)"
+
+
 def test_headtohead2_rule_from_hand_made_scores():
     """Issue 27's rule: final return not below DQN's by the interval anywhere, and the IQM of normalised AUC above n-step's."""
     module = load_script("headtohead2_rule")
