@@ -598,6 +598,40 @@ def test_search_round4_judges_frozenlake_on_ten_seeds():
     assert pending_reference[-1] == "**Choice: pending** (DQN's reference not finished on FrozenLake-v1)"
 
 
+def test_write_choice_writes_the_chosen_rounds_candidate(tmp_path: Path, capsys: pytest.CaptureFixture):
+    """offon_lambda_choice.yml: offon_lambda.yml's entries with the settings of the round that chose; none chose, none."""
+    module = load_script("write_choice")
+    choice_line = "**Choice** (the highest mean normalised AUC within the bar): lambda90_peng_half, 0.800, not above nstep10's"
+    summary = (
+        "# Searches\n\n## Off-On configurations\n\n**Winner** (highest mean normalised AUC among the eligible): max_paper\n\n"
+        "## Round 3: lambda-returns\n\n| a | b |\n\n**Choice: none** (no candidate within the bar)\n\n"
+        f"## Round 4: lambda-returns that end nearer one-step Q-learning\n\n| a | b |\n\n{choice_line}\n"
+    )
+    assert module.chosen_candidate(summary) == ("Round 4", "lambda90_peng_half")
+    no_choice = summary.replace(choice_line, "**Choice: pending** (2 of 3 candidates decided)")
+    assert module.chosen_candidate(no_choice) is None
+    (tmp_path / "summary.md").write_text(summary)
+    out = tmp_path / "offon_lambda_choice.yml"
+    assert module.main(["--summary", str(tmp_path / "summary.md"), "--out", str(out)]) == 0
+    lambda_entries = yaml.safe_load((Path(__file__).parents[1] / "hyperparams" / "offon_lambda.yml").read_text())
+    choice_entries = yaml.safe_load(out.read_text())
+    targets = {
+        "mc_initial_prob": 0.9,
+        "mc_final_prob": 0.0,
+        "mc_fraction": 0.5,
+        "qlearning_initial_prob": 0.0,
+        "qlearning_final_prob": 0.0,
+    }
+    assert set(choice_entries) == set(lambda_entries)
+    for env, entry in lambda_entries.items():
+        assert choice_entries[env] == {**entry, **targets}, env
+    assert "round 4 of the search" in out.read_text() and "`lambda90_peng_half`" in out.read_text()
+    out.unlink()
+    (tmp_path / "summary.md").write_text(no_choice)
+    assert module.main(["--summary", str(tmp_path / "summary.md"), "--out", str(out)]) == 1 and not out.exists()
+    assert "nothing written" in capsys.readouterr().err
+
+
 def test_headtohead2_rule_from_hand_made_scores():
     """Issue 27's rule: final return not below DQN's by the interval anywhere, and the IQM of normalised AUC above n-step's."""
     module = load_script("headtohead2_rule")
