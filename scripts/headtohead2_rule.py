@@ -28,7 +28,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-import plot
+import run_stats
 from search import BENCHMARK_ENVS
 
 BASELINE, NSTEP, CHOICE = "dqn", "dqn_nstep", "offon_lambda_choice"
@@ -42,7 +42,7 @@ def judge(runs: dict, scores: dict, reps: int) -> tuple[str, list[str]]:
     """
     The verdict on the defaults, and the lines that show it and the issue's targets.
 
-    :param runs: ``runs[env][algo]``, the fresh runs (``plot.Run``), for the aggregate's seeds
+    :param runs: ``runs[env][algo]``, the fresh runs (``run_stats.Run``), for the aggregate's seeds
     :param scores: ``scores[env][algo]["final" | "auc" | "steps"]``, one value per run in the order of ``runs``
     :param reps: bootstrap resamples of every interval
     :return: ("holds" | "does not hold" | "incomplete", lines)
@@ -57,21 +57,21 @@ def judge(runs: dict, scores: dict, reps: int) -> tuple[str, list[str]]:
             lines.append(f"{env}: no runs of {BASELINE if BASELINE not in by_algo else CHOICE} yet")
             continue
         dqn, choice = by_algo[BASELINE], by_algo[CHOICE]
-        point, low, high = plot.two_sample_ci(choice["final"], dqn["final"], plot.mean_difference, reps)
+        point, low, high = run_stats.two_sample_ci(choice["final"], dqn["final"], run_stats.mean_difference, reps)
         # Not wholly below zero: a NaN bound (a single run) cannot show it, and the cell is incomplete anyway
         not_below, above = bool(high >= 0), bool(low > 0)
         final_not_below += not_below
         final_above += above
-        ratio = plot.two_sample_ci(choice["steps"], dqn["steps"], plot.iqm_ratio, reps)
+        ratio = run_stats.two_sample_ci(choice["steps"], dqn["steps"], run_stats.iqm_ratio, reps)
         steps_ok += ratio[0] <= STEPS_RATIO_AT_MOST
         lines.append(
             f"{env} ({len(choice['final'])} vs {len(dqn['final'])} seeds"
             + (f"; still to run: {', '.join(missing)}" if missing else "")
-            + f"): final return minus DQN's {plot.interval_text((point, low, high), '+,.1f')} -> "
+            + f"): final return minus DQN's {run_stats.interval_text((point, low, high), '+,.1f')} -> "
             + ("above zero" if above else "not below zero" if not_below else "BELOW zero")
-            + f"; IQM steps to threshold ÷ DQN's {plot.interval_text(ratio)}"
+            + f"; IQM steps to threshold ÷ DQN's {run_stats.interval_text(ratio)}"
         )
-    aggregate = plot.aggregates(
+    aggregate = run_stats.aggregates(
         {env: {algo: runs[env][algo] for algo in ALGOS if algo in runs[env]} for env in BENCHMARK_ENVS if env in runs},
         scores,
         reps,
@@ -83,8 +83,8 @@ def judge(runs: dict, scores: dict, reps: int) -> tuple[str, list[str]]:
         choice_auc, nstep_auc = aggregate["iqm_auc"][CHOICE], aggregate["iqm_auc"][NSTEP]
         faster, apart = bool(choice_auc[0] > nstep_auc[0]), bool(choice_auc[1] > nstep_auc[2])
         lines.append(
-            f"IQM of normalised AUC over the four tasks: {CHOICE} {plot.interval_text(choice_auc)}, "
-            f"{NSTEP} {plot.interval_text(nstep_auc)}"
+            f"IQM of normalised AUC over the four tasks: {CHOICE} {run_stats.interval_text(choice_auc)}, "
+            f"{NSTEP} {run_stats.interval_text(nstep_auc)}"
         )
     else:
         lines.append("IQM of normalised AUC over the four tasks: waits until every algorithm has its runs on every task")
@@ -111,7 +111,7 @@ def main(argv: list[str] | None = None) -> str:
     parser.add_argument("--set", default="headtohead2", help="the grid's folder under --root (default: headtohead2)")
     parser.add_argument("--reps", type=int, default=2000, help="bootstrap resamples (default: 2000, as plot.py)")
     args = parser.parse_args(argv)
-    runs, scores = plot.scores_on_seeds(args.root / args.set, ALGOS, FRESH_SEEDS)
+    runs, scores = run_stats.scores_on_seeds(args.root / args.set, ALGOS, FRESH_SEEDS)
     verdict, lines = judge(runs, scores, args.reps)
     print("\n".join(lines))
     print(f"Verdict: {verdict}")

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-import plot
+import run_stats
 from search import BENCHMARK_ENVS, SCORE_RANGES, TOLERANCE
 
 BASELINE = "dqn"
@@ -39,7 +39,7 @@ def judge(scores: dict[str, dict[str, dict[str, np.ndarray]]], reps: int) -> tup
     """
     The verdict and one line per task, from ``scores[env][algo]["final" | "auc"]`` (one value per seed).
 
-    :param scores: per task and algorithm, the per-seed final returns and AUCs (``plot.run_scores``'s fields)
+    :param scores: per task and algorithm, the per-seed final returns and AUCs (``run_stats.run_scores``'s fields)
     :param reps: bootstrap resamples of the AUC intervals
     :return: ("holds" | "does not hold" | "incomplete", lines)
     """
@@ -56,8 +56,8 @@ def judge(scores: dict[str, dict[str, dict[str, np.ndarray]]], reps: int) -> tup
         bar = float(np.mean(dqn["final"])) - TOLERANCE * (high - low)
         final = float(np.mean(choice["final"]))
         final_ok += final >= bar
-        dqn_auc, choice_auc = plot.mean_interval(dqn["auc"], reps), plot.mean_interval(choice["auc"], reps)
-        apart = plot.position(choice_auc, dqn_auc) == "above, apart"
+        dqn_auc, choice_auc = run_stats.mean_interval(dqn["auc"], reps), run_stats.mean_interval(choice["auc"], reps)
+        apart = run_stats.position(choice_auc, dqn_auc) == "above, apart"
         auc_apart += apart
         lines.append(
             f"{env} ({len(choice['final'])} vs {len(dqn['final'])} seeds): final {final:.1f} against the bar {bar:.1f} "
@@ -81,7 +81,7 @@ def main(argv: list[str] | None = None) -> str:
     parser.add_argument("--set", default="headtohead", help="the grid's folder under --root (default: headtohead)")
     parser.add_argument("--reps", type=int, default=2000, help="bootstrap resamples (default: 2000, as plot.py)")
     args = parser.parse_args(argv)
-    _, scores = plot.scores_on_seeds(args.root / args.set, (BASELINE, CHOICE), FRESH_SEEDS)
+    _, scores = run_stats.scores_on_seeds(args.root / args.set, (BASELINE, CHOICE), FRESH_SEEDS)
     verdict, lines = judge(scores, args.reps)
     print("\n".join(lines))
     print(f"Verdict: {verdict}")

@@ -42,10 +42,9 @@ Usage::
 """
 
 import argparse
-import json
 import os
+import sys
 import warnings
-from dataclasses import dataclass
 from pathlib import Path
 
 import matplotlib
@@ -53,26 +52,30 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
-import pandas as pd
-from rliable import library as rly
-from rliable import metrics
-from scipy import stats
 
-# arch (rliable's bootstrap) warns that ``random_state`` will change meaning; rliable passes it
-warnings.filterwarnings("ignore", category=FutureWarning, module="arch")
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from run_stats import (
+    BASELINE,
+    FALL_PENALTY,
+    GOAL_BONUS,
+    SECTION_44,
+    Run,
+    aggregates,
+    evaluation_curves,
+    fmt,
+    interval_text,
+    iqm_ratio,
+    label,
+    load_runs,
+    mean_ci,
+    mean_difference,
+    mean_interval,
+    position,
+    run_scores,
+    threshold,
+    two_sample_ci,
+)
 
-ALGOS = ["offon_dqn", "dqn_mc", "dqn_sarsa", "dqn"]
-LABELS = {
-    "offon_dqn": "Off-On DQN",
-    "dqn_mc": "DQN with MC",
-    "dqn_sarsa": "DQN with Sarsa",
-    "dqn": "DQN",
-    "dqn_nstep": "n-step DQN",
-    "qrdqn": "QR-DQN",
-    "offon_choice": "Off-On DQN (search's choice)",
-    "offon_lambda": "Off-On λ",
-    "offon_lambda_choice": "Off-On λ (search's choice)",
-}
 COLORS = {
     "offon_dqn": "tab:red",
     "dqn_mc": "tab:green",
@@ -84,11 +87,7 @@ COLORS = {
     "offon_lambda": "tab:olive",
     "offon_lambda_choice": "tab:cyan",
 }
-BASELINE = "dqn"
-THRESHOLDS = {"CartPole-v1": 475.0, "MountainCar-v0": -110.0, "LunarLander-v3": 200.0, "Acrobot-v1": -100.0}
 PAPER_FIGURES = {"CartPole-v1": "Figure 8", "MountainCar-v0": "Figure 10", "LunarLander-v3": "Figure 12"}
-FALL_PENALTY, GOAL_BONUS = "CartPoleFallPenalty-v1", "MountainCarGoalBonus-v0"
-SECTION_44 = (FALL_PENALTY, GOAL_BONUS)
 # The stop rule of Section 4.4 (and of the YAML entries): mean length of the last 100 training episodes >= 490
 STOP_WINDOW, STOP_THRESHOLD = 100, 490.0
 
@@ -112,187 +111,6 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     args = parser.parse_args(argv)
     args.out = args.out or Path("results") / args.set
     return args
-
-
-# ----------------------------------------------------------------------------------------------------------------------
-# Loading the finished runs
-# ----------------------------------------------------------------------------------------------------------------------
-@dataclass
-class Run:
-    algo: str
-    env: str
-    seed: int
-    budget: int
-    timesteps: np.ndarray  # evaluation steps
-    returns: np.ndarray  # mean return of each evaluation
-    episodes: pd.DataFrame  # training episodes, in order: r, l, t (+ goal_reached)
-
-
-def load_run(folder: Path) -> Run | None:
-    """A finished run (as ``benchmark.py`` judges it), or None."""
-    record = json.loads((folder / "done.json").read_text())
-    try:
-        with np.load(folder / "evaluations.npz") as data:
-            timesteps, results = data["timesteps"], data["results"]
-    except (OSError, ValueError, KeyError):
-        return None
-    monitors = sorted(folder.glob("*monitor.csv"))
-    if record.get("returncode") != 0 or len(timesteps) != record.get("n_evaluations") or not monitors:
-        return None
-    # One file per training env; the first line is Monitor's JSON header. Episodes of all envs in time order.
-    episodes = pd.concat([pd.read_csv(path, skiprows=1) for path in monitors]).sort_values("t", kind="stable")
-    spec = record["spec"]
-    return Run(
-        algo=spec["algo"],
-        env=spec["env"],
-        seed=spec["seed"],
-        budget=spec["n_timesteps"],
-        timesteps=timesteps.astype(np.int64),
-        returns=results.mean(axis=1),
-        episodes=episodes.reset_index(drop=True),
-    )
-
-
-def load_runs(folder: Path) -> dict[str, dict[str, list[Run]]]:
-    """``runs[env][algo]``: the finished runs, by seed; envs and algos in a fixed order."""
-    runs: dict[str, dict[str, list[Run]]] = {}
-    for marker in sorted(folder.glob("*/*/done.json")):
-        run = load_run(marker.parent)
-        if run is None:
-            print(f"Skipped (unfinished): {marker.parent}")
-            continue
-        runs.setdefault(run.env, {}).setdefault(run.algo, []).append(run)
-    return {
-        env: {algo: sorted(by_algo[algo], key=lambda run: run.seed) for algo in sorted(by_algo, key=algo_order)}
-        for env, by_algo in sorted(runs.items())
-    }
-
-
-def scores_on_seeds(folder: Path, algos: tuple[str, ...], seeds: range, last: int = 3) -> tuple[dict, dict]:
-    """
-    ``runs[env][algo]`` and ``scores[env][algo]`` (``run_scores``'s fields) of the finished runs of ``algos`` on ``seeds``
-    only: a head-to-head's rule reads its fresh seeds and nothing else.
-    """
-    runs: dict[str, dict[str, list[Run]]] = {}
-    scores: dict[str, dict[str, dict[str, np.ndarray]]] = {}
-    for env, by_algo in load_runs(folder).items():
-        for algo in algos:
-            kept = [run for run in by_algo.get(algo, []) if run.seed in seeds]
-            if kept:
-                grid, curves = evaluation_curves(kept)
-                runs.setdefault(env, {})[algo] = kept
-                scores.setdefault(env, {})[algo] = run_scores(kept, grid, curves, last, threshold(env))
-    return runs, scores
-
-
-def algo_order(algo: str) -> tuple[int, str]:
-    return (ALGOS.index(algo) if algo in ALGOS else len(ALGOS), algo)
-
-
-def label(algo: str) -> str:
-    return LABELS.get(algo, algo)
-
-
-def threshold(env: str) -> float | None:
-    if env in THRESHOLDS:
-        return THRESHOLDS[env]
-    import gymnasium as gym
-
-    import sb3_offon.envs  # noqa: F401  (registers the Section 4.4 envs)
-
-    try:
-        return gym.spec(env).reward_threshold
-    except gym.error.Error:
-        return None
-
-
-# ----------------------------------------------------------------------------------------------------------------------
-# Statistics: means over seeds with rliable's stratified bootstrap
-# ----------------------------------------------------------------------------------------------------------------------
-def interval_estimates(scores: dict, aggregate, reps: int) -> tuple[dict, dict]:
-    """
-    ``rly.get_interval_estimates``, reproducible: the same data give the same intervals at every redraw.
-
-    rliable's ``StratifiedBootstrap`` draws its resamples from NumPy's global RNG (``update_indices`` calls
-    ``np.random.choice``) and ignores ``random_state``, so the global RNG is seeded before each call.
-    """
-    np.random.seed(0)
-    return rly.get_interval_estimates(scores, aggregate, reps=reps, random_state=np.random.RandomState(0))
-
-
-def mean_ci(values: np.ndarray, reps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Mean over runs (axis 0) of ``values`` shaped (runs,) or (runs, T), with its 95% bootstrap CI (low, high)."""
-    scores = np.asarray(values, dtype=float).reshape(len(values), 1, -1)  # rliable's (runs, tasks, T)
-    point, interval = interval_estimates({"x": scores}, lambda s: s.mean(axis=0)[0], reps)
-    return point["x"], interval["x"][0], interval["x"][1]
-
-
-def mean_interval(values: np.ndarray, reps: int) -> tuple[float, float]:
-    """The 95% bootstrap CI (low, high) of the mean of one scalar per run, as ``mean_ci`` gives it."""
-    _, low, high = mean_ci(values, reps)
-    return float(low[0]), float(high[0])
-
-
-def position(interval: tuple[float, float], baseline: tuple[float, float]) -> str:
-    """Where an interval lies against the baseline's: "above, apart", "below, apart" or "overlapping"."""
-    if interval[0] > baseline[1]:
-        return "above, apart"
-    return "below, apart" if interval[1] < baseline[0] else "overlapping"
-
-
-def fast_probability_of_improvement(scores_x: np.ndarray, scores_y: np.ndarray) -> float:
-    """``metrics.probability_of_improvement`` (Mann-Whitney U / (n_x n_y), averaged over tasks), vectorised."""
-    greater = (scores_x[:, None, :] > scores_y[None, :, :]).mean(axis=(0, 1))
-    ties = (scores_x[:, None, :] == scores_y[None, :, :]).mean(axis=(0, 1))
-    return float(np.mean(greater + 0.5 * ties))
-
-
-def evaluation_curves(runs: list[Run]) -> tuple[np.ndarray, np.ndarray]:
-    """The env's common grid of evaluation steps and every run's curve on it, (runs, T); held after a run's end."""
-    grid = np.unique(np.concatenate([run.timesteps for run in runs]))
-    return grid, np.stack([np.interp(grid, run.timesteps, run.returns) for run in runs])
-
-
-def run_scores(runs: list[Run], grid: np.ndarray, curves: np.ndarray, last: int, solve_at: float | None) -> dict:
-    """Per-run final return, AUC, steps to threshold (budget when never reached) and whether it was reached."""
-    final = curves[:, -last:].mean(axis=1)
-    auc = np.trapezoid(curves, grid, axis=1) / (grid[-1] - grid[0]) if len(grid) > 1 else curves[:, 0]
-    steps, solved = np.array([run.budget for run in runs], dtype=float), np.zeros(len(runs), dtype=bool)
-    if solve_at is not None:
-        for index, curve in enumerate(curves):
-            reached = np.flatnonzero(curve >= solve_at)
-            if len(reached):
-                steps[index], solved[index] = grid[reached[0]], True
-    return {"final": final, "auc": auc, "steps": steps, "solved": solved}
-
-
-def two_sample_ci(x: np.ndarray, y: np.ndarray, statistic, reps: int) -> tuple[float, float, float]:
-    """
-    ``statistic(x, y, axis)`` and its 95% percentile bootstrap CI, the runs of ``x`` and ``y`` resampled apart (seeded);
-    NaN bounds when a side has a single run (nothing to resample).
-    """
-    point = float(statistic(x, y, axis=-1))
-    if min(len(x), len(y)) < 2:
-        return point, np.nan, np.nan
-    with warnings.catch_warnings():
-        # Identical values on both sides (every run solved at the same step) give a zero-width interval: right as it is
-        warnings.simplefilter("ignore", stats.DegenerateDataWarning)
-        result = stats.bootstrap((x, y), statistic, n_resamples=reps, method="percentile", rng=0, paired=False)
-    return point, float(result.confidence_interval.low), float(result.confidence_interval.high)
-
-
-def mean_difference(x: np.ndarray, y: np.ndarray, axis: int = -1) -> np.ndarray:
-    return np.mean(x, axis=axis) - np.mean(y, axis=axis)
-
-
-def iqm_ratio(x: np.ndarray, y: np.ndarray, axis: int = -1) -> np.ndarray:
-    """IQM of ``x`` over IQM of ``y``: rliable's IQM, the mean of the middle half (SciPy's 25% trimmed mean)."""
-    return stats.trim_mean(x, 0.25, axis=axis) / stats.trim_mean(y, 0.25, axis=axis)
-
-
-def fmt(values: np.ndarray, reps: int, digits: int = 1) -> str:
-    point, low, high = (float(part[0]) for part in mean_ci(values, reps))
-    return f"{point:,.{digits}f} [{low:,.{digits}f}, {high:,.{digits}f}]"
 
 
 # ----------------------------------------------------------------------------------------------------------------------
@@ -450,67 +268,8 @@ def plot_goal_reaches(by_algo: dict[str, list[Run]], reps: int, out: Path, writt
 
 
 # ----------------------------------------------------------------------------------------------------------------------
-# Aggregates across envs (rliable)
+# Aggregates across envs (computed in run_stats.py)
 # ----------------------------------------------------------------------------------------------------------------------
-def incomplete_cells(by_algo: dict[str, list[Run]], algos: list[str]) -> str:
-    """What one env still lacks against its most complete variant ("" when every variant has the same seeds)."""
-    seeds = {algo: {run.seed for run in by_algo.get(algo, [])} for algo in algos}
-    every = set.union(*seeds.values())
-    missing = [
-        f"{label(algo)} {len(seeds[algo])} of {len(every)} seeds" if seeds[algo] else f"no runs of {label(algo)}"
-        for algo in algos
-        if seeds[algo] != every
-    ]
-    return ", ".join(missing)
-
-
-def aggregates(runs: dict[str, dict[str, list[Run]]], scores: dict, reps: int) -> dict | None:
-    """IQM of min-max normalised final returns and AUC, and P(improvement over DQN), over the envs all variants ran."""
-    algos = sorted({algo for by_algo in runs.values() for algo in by_algo}, key=algo_order)
-    envs = list(runs)
-    if any(env not in SECTION_44 for env in envs):
-        envs = [env for env in envs if env not in SECTION_44]
-    # An env where a variant has no runs, or fewer seeds than another (runs still to come), waits until it is complete:
-    # taken in, it would shrink that variant's aggregate to the seeds it has there, or leave the variant out
-    left_out = {env: incomplete_cells(runs[env], algos) for env in envs}
-    left_out = {env: cells for env, cells in left_out.items() if cells}
-    envs = [env for env in envs if env not in left_out]
-    if not envs:
-        return None
-    # Per algo: (runs, tasks) on the seeds it has on every env
-    matrices: dict[str, dict[str, np.ndarray]] = {"final": {}, "auc": {}}
-    for measure in matrices:
-        lows = {env: min(scores[env][algo][measure].min() for algo in algos) for env in envs}
-        highs = {env: max(scores[env][algo][measure].max() for algo in algos) for env in envs}
-        for algo in algos:
-            seeds = sorted(set.intersection(*({run.seed for run in runs[env][algo]} for env in envs)))
-            columns = []
-            for env in envs:
-                by_seed = dict(zip((run.seed for run in runs[env][algo]), scores[env][algo][measure], strict=True))
-                span = highs[env] - lows[env]
-                columns.append([(by_seed[seed] - lows[env]) / span if span > 0 else 0.5 for seed in seeds])
-            matrices[measure][algo] = np.array(columns).T
-    result: dict = {
-        "envs": envs,
-        "left_out": left_out,
-        "algos": algos,
-        "runs": {algo: len(matrices["final"][algo]) for algo in algos},
-    }
-    for measure, matrix in matrices.items():
-        point, interval = interval_estimates(matrix, lambda s: np.array([metrics.aggregate_iqm(s)]), reps)
-        result[f"iqm_{measure}"] = {algo: (point[algo][0], *interval[algo][:, 0]) for algo in algos}
-    if BASELINE in algos:
-        pairs = {algo: (matrices["final"][algo], matrices["final"][BASELINE]) for algo in algos if algo != BASELINE}
-        if pairs:
-            # rliable's metric is Mann-Whitney U per task (one SciPy test per resample and task): the same figure is
-            # computed vectorised inside rliable's bootstrap, and checked against rliable's own point estimate
-            point, interval = interval_estimates(pairs, lambda x, y: np.array([fast_probability_of_improvement(x, y)]), reps)
-            for algo, (x, y) in pairs.items():
-                assert np.isclose(point[algo][0], metrics.probability_of_improvement(x, y))
-            result["poi"] = {algo: (point[algo][0], *interval[algo][:, 0]) for algo in pairs}
-    return result
-
-
 def plot_aggregates(result: dict, out: Path, written: list) -> None:
     panels = [("iqm_final", "IQM of normalised final return"), ("iqm_auc", "IQM of normalised AUC")]
     if "poi" in result:
@@ -543,14 +302,6 @@ def left_out_text(left_out: dict[str, str]) -> str:
         + "; ".join(f"{env}, {cells}" for env, cells in left_out.items())
         + ")"
     )
-
-
-def interval_text(values: tuple[float, float, float], spec: str = ".2f") -> str:
-    """``point [low, high]`` in the format ``spec``; ``point (one run)`` where there was nothing to resample (NaN bounds)."""
-    point, low, high = values
-    if np.isnan(low):
-        return f"{point:{spec}} (one run)"
-    return f"{point:{spec}} [{low:{spec}}, {high:{spec}}]"
 
 
 def command_text(args: argparse.Namespace) -> str:

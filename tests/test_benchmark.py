@@ -351,11 +351,11 @@ def test_headtohead_rule_from_hand_made_scores():
 
 def test_aggregate_waits_for_an_env_until_every_variant_has_its_seeds():
     """An env with a variant's runs still to come stays out of the IQM, and the table says why."""
-    module = load_script("plot")
+    module, stats = load_script("plot"), load_script("run_stats")
 
     def cell(algo: str, env: str, finals: list[float], seeds: list[int]) -> tuple[list, dict]:
         runs = [
-            module.Run(algo, env, seed, 100, np.array([100]), np.array([final]), None)
+            stats.Run(algo, env, seed, 100, np.array([100]), np.array([final]), None)
             for seed, final in zip(seeds, finals, strict=True)
         ]
         return runs, {"final": np.array(finals), "auc": np.array(finals)}
@@ -375,18 +375,18 @@ def test_aggregate_waits_for_an_env_until_every_variant_has_its_seeds():
         return runs, scores
 
     for qrdqn_seeds_on_b, why in [([], "no runs of QR-DQN"), ([0, 2], "QR-DQN 2 of 3 seeds")]:
-        result = module.aggregates(*grid(qrdqn_seeds_on_b), reps=200)
+        result = stats.aggregates(*grid(qrdqn_seeds_on_b), reps=200)
         assert result["envs"] == ["A"] and result["left_out"] == {"B": why}
         # Every variant keeps all three seeds of env A, and QR-DQN's runs there are all above DQN's
         assert result["runs"] == {"dqn": 3, "qrdqn": 3} and result["poi"]["qrdqn"][0] == 1.0
         text = module.left_out_text(result["left_out"])
         assert text == f" (left out until every variant has the same seeds there: B, {why})"
-    complete = module.aggregates(*grid([0, 1, 2]), reps=200)
+    complete = stats.aggregates(*grid([0, 1, 2]), reps=200)
     assert complete["envs"] == ["A", "B"] and complete["left_out"] == {} and complete["runs"] == {"dqn": 3, "qrdqn": 3}
 
 
 def test_bootstrap_intervals_are_the_same_at_every_redraw():
-    module = load_script("plot")
+    module = load_script("run_stats")
     values = np.random.default_rng(0).normal(size=(10, 5))
     first = module.mean_ci(values, reps=500)
     np.random.seed(123)  # whatever ran before must not matter (rliable draws from NumPy's global RNG)
@@ -647,7 +647,8 @@ def test_headtohead2_rule_from_hand_made_scores():
                 kept = 9 if (algo == "qrdqn" and env == "Acrobot-v1" and n_seeds == 9) else 10
                 shift = final_shift[env] if algo == module.CHOICE else 0.0
                 runs.setdefault(env, {})[algo] = [
-                    module.plot.Run(algo, env, int(seed), 100, np.array([100]), np.array([0.0]), None) for seed in seeds[:kept]
+                    module.run_stats.Run(algo, env, int(seed), 100, np.array([100]), np.array([0.0]), None)
+                    for seed in seeds[:kept]
                 ]
                 scores.setdefault(env, {})[algo] = {
                     "final": spread[:kept] + shift,
@@ -695,6 +696,6 @@ def test_headtohead_rules_count_only_their_fresh_seeds(tmp_path: Path, rule: str
         (folder / "done.json").write_text(json.dumps({"spec": spec, "returncode": 0, "n_evaluations": 2}))
         np.savez(folder / "evaluations.npz", timesteps=np.array([100, 200]), results=np.full((2, 5), float(seed)))
         (folder / "0.monitor.csv").write_text('#{"t_start": 0}\nr,l,t\n10.0,10,0.1\n')
-    runs, scores = module.plot.scores_on_seeds(tmp_path / "grid", ("dqn",), module.FRESH_SEEDS)
+    runs, scores = module.run_stats.scores_on_seeds(tmp_path / "grid", ("dqn",), module.FRESH_SEEDS)
     assert [run.seed for run in runs["CartPole-v1"]["dqn"]] == fresh
     np.testing.assert_array_equal(scores["CartPole-v1"]["dqn"]["final"], np.array(fresh, dtype=float))
