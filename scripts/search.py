@@ -452,7 +452,7 @@ def report(args: argparse.Namespace) -> int:
         for name in ["dqn", *ROUND4_CANDIDATES]
     }
     round4_scores[ROUND2_REFERENCE] = scores[ROUND2_REFERENCE]
-    dqn_round4 = {env: mean_finals(round4_scores["dqn"], [env])[env] for env in OFFON_ENVS}
+    dqn_round4 = mean_finals(round4_scores["dqn"], OFFON_ENVS)
     dqn_round4 |= {env: np.nan for env, seeds in ROUND4_SEEDS.items() if len(round4_scores["dqn"][env]) < len(seeds)}
     lines += round4_lines(round4_scores, dqn_round4)
     out = Path(args.out)
