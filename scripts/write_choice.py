@@ -22,7 +22,6 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import search
 
-HYPERPARAMS = Path(__file__).resolve().parents[1] / "sb3_offon" / "hyperparams"
 CHOICE_LINE = re.compile(r"^\*\*Choice\*\* \(the highest mean normalised AUC within the bar\): (\w+),", re.M)
 
 
@@ -97,14 +96,15 @@ def choice_yaml(name: str, round_name: str, lambda_yaml: str) -> str:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--summary", type=Path, default=Path("results/search/summary.md"))
-    parser.add_argument("--out", type=Path, default=HYPERPARAMS / "offon_lambda_choice.yml")
+    parser.add_argument("--out", type=Path, default=search.benchmark.config_file("tuned", "offon_lambda_choice"))
     args = parser.parse_args(argv)
     chosen = chosen_candidate(args.summary.read_text())
     if chosen is None:
         print(f"{args.summary}: no round of the lambda-return search has chosen a candidate; nothing written", file=sys.stderr)
         return 1
     round_name, name = chosen
-    args.out.write_text(choice_yaml(name, round_name.lower(), (HYPERPARAMS / "offon_lambda.yml").read_text()))
+    lambda_yaml = search.benchmark.config_file("tuned", "offon_lambda").read_text()
+    args.out.write_text(choice_yaml(name, round_name.lower(), lambda_yaml))
     print(f"{args.out}: {name} ({round_name})")
     return 0
 
