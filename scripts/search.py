@@ -41,6 +41,18 @@ judged on ten seeds (0-9), the candidates' and DQN's (DQN's seeds 5-9 made with 
 seeds the standard error of DQN's own mean (0.031) exceeded the 0.02 bar. The bar stays 2% of the range below DQN's
 mean; the other four tasks keep seeds 0-4.
 
+Round 5 (issue 27, stated on 2026-11-25 after round 4 chose none and before any of its runs): rounds 1-4's rule (every
+task's five-seed mean within 2% of the range of DQN's) rejects DQN itself most of the time (``search_screen``'s
+docstring), so it could not tell a candidate from DQN. Three settings from rounds 3 and 4, judged afresh on tuning seeds
+30-34 that no run had used, DQN's reference on the same seeds: lambda 0.9 with Peng's cuts and the paper's schedule
+(0.99 -> 0.01) with Peng's (the two highest mean normalised AUCs of rounds 3-4, 0.811 and 0.781), and lambda 0.8 with
+Watkins's cuts (round 3's, below a bar on FrozenLake only). Criterion: (a) on no task of the five is the candidate
+shown below DQN, i.e. the 95% bootstrap interval of the difference of the mean final returns does not lie wholly below
+minus 2% of the range; (b) among those, the highest mean normalised AUC over the four benchmark tasks on seeds 30-34
+is the choice; (c) reported: whether it is above ``nstep10``'s 0.820 (seeds 0-4) and above DQN's on seeds 30-34. The
+choice goes to the head-to-head on seeds 20-29 as ``offon_lambda_choice``; if every candidate is shown below DQN
+somewhere, none goes.
+
 Runs that the earlier grids already made with the same settings and seeds (the tuned set: DQN, Off-On DQN and DQN with
 MC on the four benchmark tasks) are read from there, not redone. New runs go to
 ``results/raw/search/<candidate>/tuned/<algo>/<env>_<seed>/`` through ``scripts/benchmark.py``'s own functions, so they
@@ -55,21 +67,32 @@ Usage::
 
 import argparse
 import sys
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import benchmark
+import search_screen
+from search_candidates import (
+    BENCHMARK_ENVS,
+    BY_NAME,
+    OFFON_CANDIDATES,
+    OFFON_ENVS,
+    ROUND2_CANDIDATES,
+    ROUND2_REFERENCE,
+    ROUND3_CANDIDATES,
+    ROUND4_CANDIDATES,
+    ROUND4_SEEDS,
+    ROUND5_CANDIDATES,
+    ROUND5_REFERENCE,
+    STOCHASTIC_ENV,
+    TUNING_SEEDS,
+    Candidate,
+)
 
 SEARCH_ROOT = Path("results/raw/search")
 TUNED_ROOT = Path("results/raw/tuned")
-TUNING_SEEDS = [0, 1, 2, 3, 4]
-BENCHMARK_ENVS = ["CartPole-v1", "MountainCar-v0", "LunarLander-v3", "Acrobot-v1"]
-STOCHASTIC_ENV = "FrozenLake-v1"
-OFFON_ENVS = [*BENCHMARK_ENVS, STOCHASTIC_ENV]
 # FrozenLake's return is 0 or 1: 50 episodes per evaluation, not 10, to see a success rate
 EVAL_EPISODES = {STOCHASTIC_ENV: 50}
 # Fixed score ranges for the normalisation (stated before the search): about a random policy's score to a solved one's
@@ -86,156 +109,6 @@ TOLERANCE = 0.02
 # one reward of 1. A candidate whose mean final return stays below a bar even if every missing seed ended there cannot
 # reach that bar (its seeds still to come cannot change the choice, so they may run after the others')
 SCORE_CEILINGS = {"CartPole-v1": 500.0, "FrozenLake-v1": 1.0}
-
-
-@dataclass
-class Candidate:
-    name: str
-    algo: str
-    hyperparams: list[str] = field(default_factory=list)
-    envs: list[str] = field(default_factory=lambda: list(OFFON_ENVS))
-    # Runs of the tuned grid made with exactly these settings (no overrides): read from there on these envs
-    reuse_tuned: bool = False
-    description: str = ""
-    # Per task, more overrides (after ``hyperparams``)
-    per_env: dict[str, list[str]] = field(default_factory=dict)
-    # 1: the search as first stated; 2: the round added after the head-to-head; 3 and 4: the lambda-returns of issue 27
-    # (each round its own criterion, module docstring)
-    round: int = 1
-    # Per task, the seeds it is judged on where they are not the tuning seeds 0-4
-    seeds: dict[str, list[int]] = field(default_factory=dict)
-
-    def seeds_on(self, env: str) -> list[int]:
-        return self.seeds.get(env, TUNING_SEEDS)
-
-
-MAX = "mc_mixing:'max'"
-# Round 2: the bound from observed returns only, wherever the return is known
-OBSERVED_BOUND = [MAX, "mc_truncation:'drop'", "mc_initial_prob:1.0", "mc_final_prob:1.0"]
-CANDIDATES = [
-    Candidate("dqn", "dqn", reuse_tuned=True, description="SB3's DQN, the zoo's settings (the reference)"),
-    Candidate(
-        "paper", "offon_dqn", reuse_tuned=True, description="the paper: one target drawn, delta1 and delta2 0.99 -> 0.01"
-    ),
-    Candidate("mc_sample", "dqn_mc", reuse_tuned=True, description="DQN with MC: delta1 0.99 -> 0.01, no Sarsa"),
-    Candidate("max_paper", "offon_dqn", [MAX], description="lower bound max(G, y_TD), the paper's schedules"),
-    Candidate("max_qlearning", "dqn_mc", [MAX], description="lower bound, delta1 0.99 -> 0.01, no Sarsa"),
-    Candidate(
-        "max_always",
-        "dqn_mc",
-        [MAX, "mc_initial_prob:1.0", "mc_final_prob:1.0"],
-        description="lower bound wherever G is known (MCAC), no Sarsa",
-    ),
-    *[
-        Candidate(f"nstep{n}", "dqn_nstep", [f"n_steps:{n}"], envs=list(BENCHMARK_ENVS), description=f"SB3's DQN, n_steps={n}")
-        for n in (3, 5, 10)
-    ],
-    Candidate(
-        "max_drop",
-        "dqn_mc",
-        OBSERVED_BOUND,
-        round=2,
-        description="lower bound wherever an observed return is known (time-limit cuts' returns dropped), no Sarsa",
-    ),
-    Candidate(
-        "max_drop_nstep10",
-        "dqn_mc",
-        [*OBSERVED_BOUND, "n_steps:10"],
-        round=2,
-        description="the same on 10-step TD targets",
-    ),
-]
-
-
-def exploration_fractions(algo: str = "offon_lambda") -> dict[str, float]:
-    """Per task, the exploration fraction of the bundled tuned settings (the zoo's), read from ``hyperparams/``."""
-    entries = yaml.safe_load(benchmark.config_file("tuned", algo).read_text())
-    return {env: float(entries[env]["exploration_fraction"]) for env in OFFON_ENVS}
-
-
-def lambda_schedule(initial: float, final: float, fraction: float = 1.0) -> list[str]:
-    """
-    delta1 read as lambda: from ``initial`` to ``final`` over ``fraction`` of the training, then ``final`` (constant
-    where they are equal).
-    """
-    return [f"mc_initial_prob:{initial}", f"mc_final_prob:{final}", f"mc_fraction:{fraction}"]
-
-
-def trace_cuts(initial: float, final: float) -> list[str]:
-    """delta2, the trace-cut weight: 1 is Watkins's Q(lambda), 0 Peng's."""
-    return [f"qlearning_initial_prob:{initial}", f"qlearning_final_prob:{final}"]
-
-
-# Round 3: the lambda-returns (issue 27); offon_lambda's YAML gives every other setting
-WATKINS, PENG = trace_cuts(1.0, 1.0), trace_cuts(0.0, 0.0)
-CANDIDATES += [
-    *[
-        Candidate(
-            f"lambda{round(lam * 100)}_watkins",
-            "offon_lambda",
-            [*lambda_schedule(lam, lam), *WATKINS],
-            round=3,
-            description=f"lambda {lam}, Watkins's cuts (delta2 = 1)",
-        )
-        for lam in (0.8, 0.9, 0.95)
-    ],
-    Candidate(
-        "lambda90_peng",
-        "offon_lambda",
-        [*lambda_schedule(0.9, 0.9), *PENG],
-        round=3,
-        description="lambda 0.9, Peng's (no cuts, delta2 = 0)",
-    ),
-    Candidate(
-        "lambda90_peng_to_watkins",
-        "offon_lambda",
-        [*lambda_schedule(0.9, 0.9), *trace_cuts(0.0, 1.0)],
-        per_env={env: [f"qlearning_fraction:{fraction}"] for env, fraction in exploration_fractions().items()},
-        round=3,
-        description="lambda 0.9, delta2 0 -> 1 over the exploration period (Peng to Watkins as epsilon decays)",
-    ),
-    Candidate(
-        "lambda_paper_watkins",
-        "offon_lambda",
-        [*lambda_schedule(0.99, 0.01), *WATKINS],
-        round=3,
-        description="lambda 0.99 -> 0.01 over training (the paper's delta1), Watkins's cuts",
-    ),
-]
-# Round 4: lambda-returns that end nearer one-step Q-learning; FrozenLake judged on ten seeds (module docstring)
-ROUND4_SEEDS = {STOCHASTIC_ENV: list(range(10))}
-CANDIDATES += [
-    Candidate(
-        "lambda_paper_peng",
-        "offon_lambda",
-        [*lambda_schedule(0.99, 0.01), *PENG],
-        round=4,
-        seeds=ROUND4_SEEDS,
-        description="lambda 0.99 -> 0.01 over training (the paper's delta1), Peng's (no cuts)",
-    ),
-    Candidate(
-        "lambda90_peng_half",
-        "offon_lambda",
-        [*lambda_schedule(0.9, 0.0, fraction=0.5), *PENG],
-        round=4,
-        seeds=ROUND4_SEEDS,
-        description="lambda 0.9 -> 0 over the first half of training, Peng's (no cuts); one-step Q-learning after",
-    ),
-    Candidate(
-        "lambda70_watkins",
-        "offon_lambda",
-        [*lambda_schedule(0.7, 0.7), *WATKINS],
-        round=4,
-        seeds=ROUND4_SEEDS,
-        description="lambda 0.7, Watkins's cuts (delta2 = 1)",
-    ),
-]
-BY_NAME = {candidate.name: candidate for candidate in CANDIDATES}
-OFFON_CANDIDATES = [candidate.name for candidate in CANDIDATES if candidate.algo != "dqn_nstep" and candidate.round == 1]
-ROUND2_CANDIDATES = [candidate.name for candidate in CANDIDATES if candidate.round == 2]
-ROUND2_REFERENCE = "nstep10"
-ROUND3_CANDIDATES = [candidate.name for candidate in CANDIDATES if candidate.round == 3]
-ROUND4_CANDIDATES = [candidate.name for candidate in CANDIDATES if candidate.round == 4]
 
 
 def candidate_root(candidate: Candidate, env: str, search_root: Path = SEARCH_ROOT) -> Path:
@@ -455,6 +328,7 @@ def report(args: argparse.Namespace) -> int:
     dqn_round4 = mean_finals(round4_scores["dqn"], OFFON_ENVS)
     dqn_round4 |= {env: np.nan for env, seeds in ROUND4_SEEDS.items() if len(round4_scores["dqn"][env]) < len(seeds)}
     lines += round4_lines(round4_scores, dqn_round4)
+    lines += round5_lines(args.search_root, reference_mean_auc(scores))
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text("\n".join(lines) + "\n")
@@ -511,6 +385,35 @@ def round4_lines(scores: dict[str, dict[str, np.ndarray]], dqn_final: dict[str, 
     title = "## Round 4: lambda-returns that end nearer one-step Q-learning (issue 27; FrozenLake-v1 on seeds 0-9)"
     n_seeds = {env: len(seeds) for env, seeds in ROUND4_SEEDS.items()}
     return lambda_round_lines(scores, dqn_final, ROUND4_CANDIDATES, title, n_seeds)
+
+
+def round5_lines(search_root: Path, nstep_auc: float) -> list[str]:
+    """
+    Round 5: its candidates and DQN's reference on their own seeds (30-34), judged by the screen of
+    ``search_screen`` (not shown below DQN on any task by the interval of the difference), then the highest mean
+    normalised AUC over the four benchmark tasks.
+    """
+    names = [ROUND5_REFERENCE, *ROUND5_CANDIDATES]
+    scores = {
+        name: {env: collect(BY_NAME[name], env, search_root, BY_NAME[name].seeds_on(env)) for env in OFFON_ENVS}
+        for name in names
+    }
+    seeds = sorted({seed for name in names for env in OFFON_ENVS for seed in BY_NAME[name].seeds_on(env)})
+    title = (
+        f"## Round 5: the fastest lambda-returns on fresh tuning seeds {seeds[0]}-{seeds[-1]}, judged by a screen (issue 27)"
+    )
+    table = search_screen.screen_lines(
+        scores,
+        ROUND5_CANDIDATES,
+        ROUND5_REFERENCE,
+        {name: BY_NAME[name].description for name in names},
+        SCORE_RANGES,
+        TOLERANCE,
+        len(seeds),
+        BENCHMARK_ENVS,
+        nstep_auc,
+    )
+    return ["", title, "", *table]
 
 
 def lambda_round_lines(

@@ -22,7 +22,15 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import search
 
-CHOICE_LINE = re.compile(r"^\*\*Choice\*\* \(the highest mean normalised AUC within the bar\): (\w+),", re.M)
+CHOICE_LINE = re.compile(r"^\*\*Choice\*\* \(the highest mean normalised AUC [^)]*\): (\w+),", re.M)
+# What chose, by round (stated before each round's runs: scripts/search.py's docstring)
+CRITERIA = {
+    3: "the highest mean normalised AUC over the four benchmark tasks among the candidates whose mean final return is "
+    "nowhere more than 2% of the task's range below DQN's",
+    5: "the highest mean normalised AUC over the four benchmark tasks among the candidates that no task shows below "
+    "DQN, by the 95% bootstrap interval of the difference of the mean final returns against 2% of the task's range",
+}
+CRITERIA[4] = CRITERIA[3]
 
 
 def chosen_candidate(summary: str) -> tuple[str, str] | None:
@@ -52,6 +60,14 @@ def describe(overrides: dict[str, str]) -> list[str]:
     return [lam, cuts[cut0] if cut0 == cut1 else f"delta2 from {cut0} to {cut1}."]
 
 
+def seeds_text(candidate: search.Candidate) -> str:
+    """The tuning seeds ``candidate`` was judged on: "0-4", or "0-4 (FrozenLake-v1: 0-9)" where a task had others."""
+    ranges = {env: f"{min(seeds)}-{max(seeds)}" for env in candidate.envs for seeds in [candidate.seeds_on(env)]}
+    common = max(set(ranges.values()), key=list(ranges.values()).count)
+    others = ", ".join(f"{env}: {text}" for env, text in ranges.items() if text != common)
+    return f"{common} ({others})" if others else common
+
+
 def comment(text: str, indent: str = "# ") -> str:
     """``text`` as YAML comment lines of at most 120 characters."""
     return textwrap.fill(text, width=120, initial_indent=indent, subsequent_indent=indent, break_on_hyphens=False)
@@ -71,13 +87,16 @@ def choice_yaml(name: str, round_name: str, lambda_yaml: str) -> str:
             raise ValueError(f"offon_lambda.yml has no `{key}` line in its target block")
     lam, cuts = describe(overrides)
     chosen = (
-        f"The chosen candidate, `{name}` ({candidate.description}), by the criterion stated before the runs (the "
-        "highest mean normalised AUC over the four benchmark tasks among the candidates whose mean final return is "
-        "nowhere more than 2% of the task's range below DQN's):"
+        f"The chosen candidate, `{name}` ({candidate.description}), by the criterion stated before the runs "
+        f"({CRITERIA[int(round_name.split()[-1])]}):"
     )
-    header = f"""# Off-On lambda, the search's choice (`--algo offon_lambda_choice`): OffOnDQN with mc_mixing="lambda" and
-# the one setting of lambda and delta2 that {round_name} of the search (issue 27) chose for every task on tuning seeds 0-4
-# (results/search/README.md, results/search/summary.md), under a name of its own for the head-to-head on seeds 20-29.
+    origin = (
+        'Off-On lambda, the search\'s choice (`--algo offon_lambda_choice`): OffOnDQN with mc_mixing="lambda" and the '
+        f"one setting of lambda and delta2 that {round_name} of the search (issue 27) chose for every task on tuning seeds "
+        f"{seeds_text(candidate)} (results/search/README.md, results/search/summary.md), under a name of its own for the "
+        "head-to-head on seeds 20-29."
+    )
+    header = f"""{comment(origin)}
 # Written by scripts/write_choice.py.
 #
 # DQN settings: rl-baselines3-zoo 2.9.2's tuned `dqn` entries (copied in dqn.yml next to this file), values

@@ -598,6 +598,92 @@ def test_search_round4_judges_frozenlake_on_ten_seeds():
     assert pending_reference[-1] == "**Choice: pending** (DQN's reference not finished on FrozenLake-v1)"
 
 
+def test_search_round5_runs_on_fresh_tuning_seeds(tmp_path: Path, capsys: pytest.CaptureFixture):
+    """Round 5: seeds 30-34 on every task, DQN's reference in a folder of its own; the settings of rounds 3-4's candidates."""
+    module = load_script("search")
+    for name in [module.ROUND5_REFERENCE, *module.ROUND5_CANDIDATES]:
+        assert module.main(["run", "--candidates", name, "--search-root", str(tmp_path), "--dry-run"]) == 0
+        listed = [Path(line.split()[0]) for line in capsys.readouterr().out.splitlines()[1:]]
+        assert sorted(folder.name for folder in listed) == sorted(
+            f"{env}_{seed}" for env in module.OFFON_ENVS for seed in range(30, 35)
+        )
+        # Under the search's root, not the tuned grid's: the grid keeps its own seeds
+        assert all(folder.parents[2] == tmp_path / name for folder in listed)
+    # Never the seeds of the first head-to-head (10-19) or those reserved for the second (20-29)
+    used = {seed for candidate in module.BY_NAME.values() for env in candidate.envs for seed in candidate.seeds_on(env)}
+    assert not used & set(range(10, 30))
+    for name, earlier in [("lambda90_peng_r5", "lambda90_peng"), ("lambda_paper_peng_r5", "lambda_paper_peng")]:
+        assert module.BY_NAME[name].hyperparams == module.BY_NAME[earlier].hyperparams
+    assert module.BY_NAME["lambda80_watkins_r5"].hyperparams == module.BY_NAME["lambda80_watkins"].hyperparams
+    assert module.BY_NAME[module.ROUND5_REFERENCE].algo == "dqn" and not module.BY_NAME[module.ROUND5_REFERENCE].hyperparams
+
+
+def test_search_round5_screen_from_hand_made_scores():
+    """Round 5's screen: out only where the interval of the difference lies wholly below the bar; then the highest AUC."""
+    search = load_script("search")
+    screen = search.search_screen
+    ranges, tasks = search.SCORE_RANGES, search.OFFON_ENVS
+    spread = np.array([-2.0, -1.0, 0.0, 1.0, 2.0])  # mean 0
+
+    def scores(auc: float, shift: dict[str, float] | None = None, seeds: int = 5) -> dict[str, np.ndarray]:
+        """Finals: the middle of each range, 5% of the range apart from seed to seed, plus ``shift`` (a share of the range)."""
+        rows = {}
+        for env in tasks:
+            low, high = ranges[env]
+            finals = (low + high) / 2 + (spread * 0.05 + (shift or {}).get(env, 0.0)) * (high - low)
+            rows[env] = np.column_stack([finals, np.full(5, low + auc * (high - low))])[:seeds]
+        return rows
+
+    def table(candidates: dict[str, dict[str, np.ndarray]], reference: dict[str, np.ndarray] | None = None) -> list[str]:
+        everything = {"dqn_r5": reference if reference is not None else scores(0.4), **candidates}
+        descriptions = {name: name for name in everything}
+        return screen.screen_lines(
+            everything, list(candidates), "dqn_r5", descriptions, ranges, 0.02, 5, search.BENCHMARK_ENVS, 0.82
+        )
+
+    def verdict(name: str, lines: list[str]) -> str:
+        return next(line for line in lines if line.startswith(f"| {name} |")).rstrip(" |").split(" | ")[-1]
+
+    # As DQN: passes. 3% of the range below on CartPole with a 5% spread: not shown below (the interval reaches above
+    # -2%). 30% below on LunarLander: shown below there. The choice is the fastest of those that pass.
+    lines = table(
+        {
+            "same": scores(0.6),
+            "noisy_lower": scores(0.9, {"CartPole-v1": -0.03}),
+            "far_below": scores(0.95, {"LunarLander-v3": -0.3}),
+        }
+    )
+    assert verdict("same", lines) == "yes" and verdict("noisy_lower", lines) == "yes"
+    assert verdict("far_below", lines) == "no: shown below on LunarLander-v3"
+    assert lines[-1] == (
+        "**Choice** (the highest mean normalised AUC among those not shown below DQN): noisy_lower, 0.900, "
+        "above nstep10's 0.820 (seeds 0-4), above DQN's 0.400 (same seeds)"
+    )
+    assert table({"far_below": scores(0.95, {"LunarLander-v3": -0.3})})[-1].startswith("**Choice: none**")
+    # Four seeds of the reference, or of a candidate: nothing judged, no choice
+    short = table({"same": scores(0.6)}, reference=scores(0.4, seeds=4))
+    assert verdict("same", short) == "pending" and short[-1].startswith("**Choice: pending** (0 of 1")
+    assert verdict("same", table({"same": scores(0.6, seeds=4)})) == "pending"
+    # The bound itself: below only when the interval's upper end is under minus the tolerance
+    assert screen.shown_below((-20.0, -30.0, -10.5), 10.0) and not screen.shown_below((-20.0, -30.0, -10.0), 10.0)
+    assert not screen.shown_below((-20.0, np.nan, np.nan), 10.0)
+    point, low, high = screen.difference_interval(np.array([1.0, 2.0, 3.0]), np.array([0.0, 0.0, 0.0]))
+    assert point == 2.0 and 1.0 <= low < 2.0 < high <= 3.0
+
+
+def test_dqn_against_its_bar_is_the_table_of_the_search_readme():
+    """The README's table of DQN's own runs against the point rule's bars is what the script prints from the runs."""
+    root = Path(__file__).parents[1]
+    printed = subprocess.run(
+        [sys.executable, str(SCRIPTS / "dqn_against_its_bar.py")], cwd=root, capture_output=True, text=True, check=True
+    ).stdout
+    rows = [line for line in printed.splitlines() if line.startswith("| ")]
+    assert len(rows) == 1 + len(load_script("search").BENCHMARK_ENVS)
+    readme = (root / "results" / "search" / "README.md").read_text()
+    for row in rows:
+        assert row in readme, row
+
+
 def test_write_choice_writes_the_chosen_rounds_candidate(tmp_path: Path, capsys: pytest.CaptureFixture):
     """offon_lambda_choice.yml: offon_lambda.yml's entries with the settings of the round that chose; none chose, none."""
     module = load_script("write_choice")
@@ -626,6 +712,25 @@ def test_write_choice_writes_the_chosen_rounds_candidate(tmp_path: Path, capsys:
     for env, entry in lambda_entries.items():
         assert choice_entries[env] == {**entry, **targets}, env
     assert "round 4 of the search" in out.read_text() and "`lambda90_peng_half`" in out.read_text()
+    assert "tuning seeds 0-4 (FrozenLake-v1: 0-9)" in " ".join(out.read_text().replace("#", " ").split())
+    out.unlink()
+    # A later round's choice wins; round 5's header says its seeds and its criterion
+    round5_line = (
+        "**Choice** (the highest mean normalised AUC among those not shown below DQN): lambda90_peng_r5, 0.810, "
+        "not above nstep10's 0.820 (seeds 0-4), above DQN's 0.500 (same seeds)"
+    )
+    (tmp_path / "summary.md").write_text(summary + f"\n## Round 5: on fresh tuning seeds\n\n| a | b |\n\n{round5_line}\n")
+    assert module.main(["--summary", str(tmp_path / "summary.md"), "--out", str(out)]) == 0
+    text = out.read_text()
+    assert "round 5 of the search" in text and "tuning seeds 30-34" in text and "bootstrap interval" in text
+    for env, entry in lambda_entries.items():
+        assert yaml.safe_load(text)[env] == {
+            **entry,
+            **targets,
+            "mc_initial_prob": 0.9,
+            "mc_final_prob": 0.9,
+            "mc_fraction": 1.0,
+        }
     out.unlink()
     (tmp_path / "summary.md").write_text(no_choice)
     assert module.main(["--summary", str(tmp_path / "summary.md"), "--out", str(out)]) == 1 and not out.exists()
