@@ -671,6 +671,45 @@ def test_search_round5_screen_from_hand_made_scores():
     assert point == 2.0 and 1.0 <= low < 2.0 < high <= 3.0
 
 
+def test_search_report_chooses_in_round5_and_write_choice_writes_it(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
+):
+    """From hand-made runs on seeds 30-34: `search.py report` chooses the fastest candidate not shown below DQN in round
+    5, and `write_choice.py` writes that candidate's settings from the summary."""
+    search, write_choice = load_script("search"), load_script("write_choice")
+    monkeypatch.chdir(Path(__file__).parents[1])  # earlier rounds read the tuned grid's committed runs
+    root = tmp_path / "search"
+
+    def make_run(name: str, env: str, seed: int, shares: list[float]) -> None:
+        """Four evaluations (one episode each) at these shares of the task's range, 1% of the range apart per seed."""
+        low, high = search.SCORE_RANGES[env]
+        folder = root / name / "tuned" / search.BY_NAME[name].algo / f"{env}_{seed}"
+        folder.mkdir(parents=True)
+        returns = low + (np.array(shares) + 0.01 * (seed - 32)) * (high - low)
+        np.savez(folder / "evaluations.npz", timesteps=np.arange(4) * 1000, results=returns[:, None])
+        (folder / "done.json").write_text("{}")
+
+    slow, fast, fastest = [0.0, 0.5, 0.5, 0.5], [0.5, 0.5, 0.5, 0.5], [1.0, 0.5, 0.5, 0.5]
+    for env in search.OFFON_ENVS:
+        for seed in range(30, 35):
+            make_run("dqn_r5", env, seed, slow)
+            make_run("lambda80_watkins_r5", env, seed, slow)
+            make_run("lambda90_peng_r5", env, seed, fast)
+            # The fastest, but it ends LunarLander-v3 at the bottom of the range
+            make_run("lambda_paper_peng_r5", env, seed, [1.0, 0.0, 0.0, 0.0] if env == "LunarLander-v3" else fastest)
+    summary = tmp_path / "summary.md"
+    assert search.main(["report", "--out", str(summary), "--search-root", str(root)]) == 0
+    round5 = summary.read_text().split("## Round 5")[1]
+    assert "| lambda_paper_peng_r5 |" in round5 and "no: shown below on LunarLander-v3 |" in round5
+    assert "**Choice** (the highest mean normalised AUC among those not shown below DQN): lambda90_peng_r5, 0.500," in round5
+    out = tmp_path / "offon_lambda_choice.yml"
+    assert write_choice.main(["--summary", str(summary), "--out", str(out)]) == 0
+    entries = yaml.safe_load(out.read_text())
+    expected = {"mc_initial_prob": 0.9, "mc_final_prob": 0.9, "qlearning_initial_prob": 0.0, "qlearning_final_prob": 0.0}
+    assert all({key: entry[key] for key in expected} == expected for entry in entries.values())
+    assert "lambda90_peng_r5" in capsys.readouterr().out
+
+
 def test_dqn_against_its_bar_is_the_table_of_the_search_readme():
     """The README's table of DQN's own runs against the point rule's bars is what the script prints from the runs."""
     root = Path(__file__).parents[1]
