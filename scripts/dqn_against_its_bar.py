@@ -29,8 +29,7 @@ print("|---|---:|---:|---:|---:|---:|")
 all_pass = 1.0
 for env in search.BENCHMARK_ENVS:
     reference = search.collect(search.BY_NAME["dqn"], env)[:, 0]
-    low, high = search.SCORE_RANGES[env]
-    bar = reference.mean() - search.TOLERANCE * (high - low)
+    bar = search.bar(env, reference.mean())
     fresh = np.array([search.run_scores(args.headtohead_root / f"{env}_{seed}")[0] for seed in range(10, 20)])
     # Five runs drawn with replacement from all fifteen, as if DQN were a candidate judged on five new seeds
     draws = rng.choice(np.concatenate([reference, fresh]), size=(args.draws, 5)).mean(axis=1)

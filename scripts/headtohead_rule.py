@@ -5,7 +5,7 @@ Issue 13, step 6: does the search's choice hold on the head-to-head's fresh seed
 ``offon_choice``'s target settings become OffOnDQN's defaults only if, over the ten seeds 10-19:
 
 1. on each of the four tasks its mean final return (mean of the last three evaluations) is at least DQN's minus 2% of
-   the task's range: the search's own bar (``scripts/search.py``'s ``SCORE_RANGES`` and ``TOLERANCE``);
+   the task's range: the search's own bar (``scripts/search.py``'s ``bar``);
 2. its AUC lies above DQN's with the two 95% intervals apart on at least three of the four tasks (the intervals of
    ``scripts/plot.py``'s tables and of its "Against DQN" verdict).
 
@@ -26,7 +26,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import run_stats
-from search import BENCHMARK_ENVS, SCORE_RANGES, TOLERANCE
+import search
+from search import BENCHMARK_ENVS
 
 BASELINE = "dqn"
 CHOICE = "offon_choice"
@@ -52,8 +53,7 @@ def judge(scores: dict[str, dict[str, dict[str, np.ndarray]]], reps: int) -> tup
             continue
         dqn, choice = by_algo[BASELINE], by_algo[CHOICE]
         complete &= min(len(dqn["final"]), len(choice["final"])) >= SEEDS
-        low, high = SCORE_RANGES[env]
-        bar = float(np.mean(dqn["final"])) - TOLERANCE * (high - low)
+        bar = search.bar(env, float(np.mean(dqn["final"])))
         final = float(np.mean(choice["final"]))
         final_ok += final >= bar
         dqn_auc, choice_auc = run_stats.mean_interval(dqn["auc"], reps), run_stats.mean_interval(choice["auc"], reps)

@@ -198,10 +198,15 @@ def normalise(env: str, value: np.ndarray | float) -> np.ndarray | float:
     return (value - low) / (high - low)
 
 
+def bar(env: str, reference: float) -> float:
+    """The lowest mean final return on ``env`` still within ``TOLERANCE`` of the task's range of ``reference``'s."""
+    low, high = SCORE_RANGES[env]
+    return reference - TOLERANCE * (high - low)
+
+
 def within_bars(env: str, final: float, references: list[float]) -> bool:
     """Whether a mean final return on ``env`` is at most ``TOLERANCE`` of the task's range below every reference's."""
-    low, high = SCORE_RANGES[env]
-    return all(bool(final >= reference - TOLERANCE * (high - low)) for reference in references)
+    return all(bool(final >= bar(env, reference)) for reference in references)
 
 
 def candidate_row(

@@ -405,6 +405,16 @@ def test_search_runs_the_seeds_it_is_given(tmp_path: Path):
         assert [spec["seed"] for spec, _ in specs] == seeds and all(root == tmp_path / "max_drop" for _, root in specs)
 
 
+def test_search_bar_is_two_percent_of_the_range_below_the_reference():
+    """The bar of rounds 1-4 and of the first head-to-head's rule: 2% of each task's range below the reference."""
+    module = load_script("search")
+    assert module.bar("CartPole-v1", 400.0) == pytest.approx(390.0)  # range 0..500
+    assert module.bar("LunarLander-v3", 100.0) == pytest.approx(90.0)  # range -250..250
+    assert module.bar("MountainCar-v0", -120.0) == pytest.approx(-122.0)  # range -200..-100
+    assert module.within_bars("CartPole-v1", 390.0, [400.0, 380.0])
+    assert not module.within_bars("CartPole-v1", 389.9, [400.0, 380.0])
+
+
 def test_search_round2_verdict_from_hand_made_scores():
     """Round 2 of the search: within the bar of DQN (five tasks) and nstep10 (four), and a mean normalised AUC above."""
     module = load_script("search")
