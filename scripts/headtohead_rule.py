@@ -27,7 +27,6 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import run_stats
 import search
-from search import BENCHMARK_ENVS
 
 BASELINE = "dqn"
 CHOICE = "offon_choice"
@@ -45,7 +44,7 @@ def judge(scores: dict[str, dict[str, dict[str, np.ndarray]]], reps: int) -> tup
     :return: ("holds" | "does not hold" | "incomplete", lines)
     """
     lines, final_ok, auc_apart, complete = [], 0, 0, True
-    for env in BENCHMARK_ENVS:
+    for env in search.BENCHMARK_ENVS:
         by_algo = scores.get(env, {})
         if BASELINE not in by_algo or CHOICE not in by_algo:
             lines.append(f"{env}: no runs of {BASELINE if BASELINE not in by_algo else CHOICE} yet")
@@ -66,12 +65,12 @@ def judge(scores: dict[str, dict[str, dict[str, np.ndarray]]], reps: int) -> tup
             f"{'above, apart' if apart else 'not apart above'}"
         )
     lines.append(
-        f"Final return at or above the bar on {final_ok} of {len(BENCHMARK_ENVS)} tasks (all needed); "
+        f"Final return at or above the bar on {final_ok} of {len(search.BENCHMARK_ENVS)} tasks (all needed); "
         f"AUC above DQN's and apart on {auc_apart} (at least {AUC_APART_AT_LEAST} needed)"
     )
     if not complete:
         return "incomplete", lines
-    holds = final_ok == len(BENCHMARK_ENVS) and auc_apart >= AUC_APART_AT_LEAST
+    holds = final_ok == len(search.BENCHMARK_ENVS) and auc_apart >= AUC_APART_AT_LEAST
     return ("holds" if holds else "does not hold"), lines
 
 
