@@ -41,7 +41,9 @@ HYPERPARAMS_DIR = Path(__file__).resolve().parent / "hyperparams"
 # DQN under a name of its own, so that its settings (the zoo's DQN entries plus ``n_steps``) and its logs are apart
 # from plain DQN's. The zoo already registers ``dqn`` and ``qrdqn`` (sb3-contrib); this package bundles their settings.
 # ``offon_choice`` is OffOnDQN with the target settings that issue 13's search chose, all of them in its YAML file;
-# ``offon_lambda`` is OffOnDQN with mc_mixing="lambda" (lambda-returns), its settings in its YAML file too.
+# ``offon_lambda`` is OffOnDQN with mc_mixing="lambda" (lambda-returns), its settings in its YAML file too;
+# ``offon_lambda_choice`` is ``offon_lambda`` with the setting of lambda and delta2 that issue 27's search chose
+# (its YAML file is written by scripts/write_choice.py from the search's report).
 ALGOS: dict[str, type[BaseAlgorithm]] = {
     "offon_dqn": OffOnDQN,
     "dqn_mc": DQNMC,
@@ -49,6 +51,7 @@ ALGOS: dict[str, type[BaseAlgorithm]] = {
     "dqn_nstep": DQN,
     "offon_choice": OffOnDQN,
     "offon_lambda": OffOnDQN,
+    "offon_lambda_choice": OffOnDQN,
 }
 
 
@@ -229,6 +232,7 @@ SAMPLERS = {
     # The search's choice fixes delta2 at 1 (no Sarsa), as DQNMC does: the same parameters are worth sampling
     "offon_choice": sample_dqn_mc_params,
     "offon_lambda": sample_offon_lambda_params,
+    "offon_lambda_choice": sample_offon_lambda_params,
 }
 
 

@@ -28,7 +28,7 @@ BASELINE_CLASSES = {"dqn_nstep": DQN, "qrdqn": QRDQN}
 # The configuration the search of issue 13 chose: the four tasks and the search's stochastic one
 CHOICE_CLASSES = {"offon_choice": OffOnDQN}
 # Issue 26: OffOnDQN with mc_mixing="lambda" on the same tasks
-LAMBDA_CLASSES = {"offon_lambda": OffOnDQN}
+LAMBDA_CLASSES = {"offon_lambda": OffOnDQN, "offon_lambda_choice": OffOnDQN}
 CLASSES = {**PAPER_CLASSES, **BASELINE_CLASSES, **CHOICE_CLASSES, **LAMBDA_CLASSES}
 BASELINE_ENVS = {"default", "atari", "CartPole-v1", "MountainCar-v0", "LunarLander-v3", "Acrobot-v1"}
 CHOICE_ENVS = BASELINE_ENVS | {"FrozenLake-v1"}
@@ -144,6 +144,32 @@ def test_lambda_file_is_the_dqn_settings_with_lambda_targets() -> None:
         assert {key: value for key, value in entry.items() if key not in TARGET_KEYS} == dqn[env_id], env_id
 
 
+def test_lambda_choice_is_offon_lambda_with_the_search_choice() -> None:
+    """
+    `offon_lambda_choice`: every entry is the `offon_lambda` one with the target settings of the candidate that the
+    search's report chose (results/search/summary.md, read as scripts/write_choice.py reads it), and nothing else.
+    """
+    scripts = Path(__file__).parents[1] / "scripts"
+    spec = importlib.util.spec_from_file_location("write_choice_script", scripts / "write_choice.py")
+    write_choice = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(write_choice)
+    chosen = write_choice.chosen_candidate((Path(__file__).parents[1] / "results" / "search" / "summary.md").read_text())
+    assert chosen is not None, "offon_lambda_choice.yml exists, so a round of the search chose a candidate"
+    round_name, name = chosen
+    overrides = {}
+    for item in write_choice.search.BY_NAME[name].hyperparams:
+        key, value = item.split(":", 1)
+        overrides[key] = yaml.safe_load(value)
+    lambda_entries = load(HYPERPARAMS_DIR / "offon_lambda.yml")
+    choice_entries = load(HYPERPARAMS_DIR / "offon_lambda_choice.yml")
+    assert set(choice_entries) == set(lambda_entries)
+    for env_id, entry in choice_entries.items():
+        assert entry == {**lambda_entries[env_id], **overrides}, env_id
+        assert entry["mc_mixing"] == "lambda", env_id
+    header = (HYPERPARAMS_DIR / "offon_lambda_choice.yml").read_text()
+    assert f"`{name}`" in header and round_name.lower() in header
+
+
 def test_dqn_file_copies_the_zoo() -> None:
     zoo = load(Path(rl_zoo3.__file__).parent / "hyperparams" / "dqn.yml")
     ours = load(HYPERPARAMS_DIR / "dqn.yml")
@@ -246,7 +272,7 @@ def test_sampler(algo: str) -> None:
         if algo == "dqn_nstep":
             assert sampled["n_steps"] in (3, 5, 10)
             continue
-        if algo == "offon_lambda":
+        if algo in LAMBDA_CLASSES:
             # lambda and delta2 schedules; mc_mixing stays the YAML's "lambda", and there is no Sarsa target to choose
             assert {"mc_initial_prob", "qlearning_initial_prob", "mc_truncation", "loss"} <= set(sampled)
             assert not {"mc_mixing", "sarsa_target"} & set(sampled)
