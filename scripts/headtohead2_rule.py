@@ -27,6 +27,8 @@ import argparse
 import sys
 from pathlib import Path
 
+import numpy as np
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import run_stats
 from search import BENCHMARK_ENVS
@@ -58,17 +60,21 @@ def judge(runs: dict, scores: dict, reps: int) -> tuple[str, list[str]]:
             continue
         dqn, choice = by_algo[BASELINE], by_algo[CHOICE]
         point, low, high = run_stats.two_sample_ci(choice["final"], dqn["final"], run_stats.mean_difference, reps)
-        # Not wholly below zero: a NaN bound (a single run) cannot show it, and the cell is incomplete anyway
-        not_below, above = bool(high >= 0), bool(low > 0)
+        # Not wholly below zero: a NaN bound (a single run) cannot show it, and the cell is incomplete anyway.
+        # Written as `not high < 0` because `high >= 0` is False for NaN and would call one run "below".
+        not_below, above = not bool(high < 0), bool(low > 0)
         final_not_below += not_below
         final_above += above
         ratio = run_stats.two_sample_ci(choice["steps"], dqn["steps"], run_stats.iqm_ratio, reps)
         steps_ok += ratio[0] <= STEPS_RATIO_AT_MOST
+        reading = "above zero" if above else "not below zero" if not_below else "BELOW zero"
+        if np.isnan(high):
+            reading = "no interval yet"
         lines.append(
             f"{env} ({len(choice['final'])} vs {len(dqn['final'])} seeds"
             + (f"; still to run: {', '.join(missing)}" if missing else "")
             + f"): final return minus DQN's {run_stats.interval_text((point, low, high), '+,.1f')} -> "
-            + ("above zero" if above else "not below zero" if not_below else "BELOW zero")
+            + reading
             + f"; IQM steps to threshold ÷ DQN's {run_stats.interval_text(ratio)}"
         )
     aggregate = run_stats.aggregates(

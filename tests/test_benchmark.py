@@ -837,6 +837,15 @@ def test_headtohead2_rule_from_hand_made_scores():
     # A cell with nine seeds: no decision yet, and the aggregate waits
     verdict, lines = module.judge(*grid(even, level, n_seeds=9), reps=300)
     assert verdict == "incomplete" and "still to run: qrdqn" in lines[3] and "waits until" in lines[4], lines
+    # One run each has no interval: the interim line says so instead of calling it below zero, and the task is not
+    # counted against the choice (the cell is incomplete anyway)
+    runs, scores = grid(dict(even, **{"Acrobot-v1": 30.0}), level)
+    for env in envs:
+        runs[env] = {algo: value[:1] for algo, value in runs[env].items()}
+        scores[env] = {algo: {key: values[:1] for key, values in value.items()} for algo, value in scores[env].items()}
+    verdict, lines = module.judge(runs, scores, reps=300)
+    assert verdict == "incomplete" and "+30.0 (one run) -> no interval yet;" in lines[3], lines
+    assert lines[-5].endswith("4 of 4 tasks (all needed)"), lines
 
 
 @pytest.mark.parametrize("rule, fresh", [("headtohead_rule", [10, 19]), ("headtohead2_rule", [20, 29])])
