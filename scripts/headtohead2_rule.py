@@ -20,7 +20,10 @@ Usage::
     python scripts/headtohead2_rule.py --root results/raw --set headtohead2
 
 Prints one line per task, the aggregate, the targets and the verdict: "holds", "does not hold", or "incomplete" while
-a cell lacks seeds (the lines are then an interim view, not a decision).
+a cell lacks seeds (the lines are then an interim view, not a decision). Part 1 reads only DQN's and the choice's runs:
+once both have all ten seeds on a task and the interval there lies wholly below zero, the rule has failed whatever the
+other runs say, and the verdict is "does not hold" before the grid is complete (added 2026-11-26, with no task's
+DQN and choice cells complete; the rule is unchanged, only the moment it can be read).
 """
 
 import argparse
@@ -49,7 +52,7 @@ def judge(runs: dict, scores: dict, reps: int) -> tuple[str, list[str]]:
     :param reps: bootstrap resamples of every interval
     :return: ("holds" | "does not hold" | "incomplete", lines)
     """
-    lines, complete = [], True
+    lines, complete, failed_for_good = [], True, False
     final_not_below, final_above, steps_ok = 0, 0, 0
     for env in BENCHMARK_ENVS:
         by_algo = scores.get(env, {})
@@ -63,6 +66,8 @@ def judge(runs: dict, scores: dict, reps: int) -> tuple[str, list[str]]:
         # Not wholly below zero: a NaN bound (a single run) cannot show it, and the cell is incomplete anyway.
         # Written as `not high < 0` because `high >= 0` is False for NaN and would call one run "below".
         not_below, above = not bool(high < 0), bool(low > 0)
+        # Part 1 here depends on these two cells alone: complete and below, no other run can save the rule
+        failed_for_good |= not not_below and min(len(choice["final"]), len(dqn["final"])) >= len(FRESH_SEEDS)
         final_not_below += not_below
         final_above += above
         ratio = run_stats.two_sample_ci(choice["steps"], dqn["steps"], run_stats.iqm_ratio, reps)
@@ -107,6 +112,9 @@ def judge(runs: dict, scores: dict, reps: int) -> tuple[str, list[str]]:
         + f" ({steps_ok} of {tasks})",
     ]
     if not complete:
+        if failed_for_good:
+            lines.append("Rule 1 failed on a task whose DQN and choice runs are all in: the remaining runs cannot change that")
+            return "does not hold", lines
         return "incomplete", lines
     return ("holds" if final_not_below == tasks and faster else "does not hold"), lines
 

@@ -837,6 +837,16 @@ def test_headtohead2_rule_from_hand_made_scores():
     # A cell with nine seeds: no decision yet, and the aggregate waits
     verdict, lines = module.judge(*grid(even, level, n_seeds=9), reps=300)
     assert verdict == "incomplete" and "still to run: qrdqn" in lines[3] and "waits until" in lines[4], lines
+    # Part 1 failed on a task whose DQN and choice cells are complete: decided before QR-DQN's last run
+    below = dict(even, **{"Acrobot-v1": -20.0})
+    verdict, lines = module.judge(*grid(below, level, n_seeds=9), reps=300)
+    assert verdict == "does not hold" and "BELOW zero" in lines[3] and "cannot change" in lines[-1], lines
+    # ... but not while the choice's own cell on that task lacks a seed: its tenth run could move the interval
+    runs, scores = grid(below, level)
+    runs["Acrobot-v1"][module.CHOICE] = runs["Acrobot-v1"][module.CHOICE][:9]
+    scores["Acrobot-v1"][module.CHOICE] = {key: values[:9] for key, values in scores["Acrobot-v1"][module.CHOICE].items()}
+    verdict, lines = module.judge(runs, scores, reps=300)
+    assert verdict == "incomplete" and "BELOW zero" in lines[3] and "still to run: offon_lambda_choice" in lines[3], lines
     # One run each has no interval: the interim line says so instead of calling it below zero, and the task is not
     # counted against the choice (the cell is incomplete anyway)
     runs, scores = grid(dict(even, **{"Acrobot-v1": 30.0}), level)
