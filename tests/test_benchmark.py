@@ -837,6 +837,7 @@ def test_headtohead2_rule_from_hand_made_scores():
     # A cell with nine seeds: no decision yet, and the aggregate waits
     verdict, lines = module.judge(*grid(even, level, n_seeds=9), reps=300)
     assert verdict == "incomplete" and "still to run: qrdqn" in lines[3] and "waits until" in lines[4], lines
+    assert lines[-4].endswith("n-step DQN's: waits") and lines[-3].endswith("apart: waits"), lines
     # Part 1 failed on a task whose DQN and choice cells are complete: decided before QR-DQN's last run
     below = dict(even, **{"Acrobot-v1": -20.0})
     verdict, lines = module.judge(*grid(below, level, n_seeds=9), reps=300)
