@@ -371,11 +371,6 @@ def test_lambda_and_trace_cuts_are_logged():
     assert 0.0 < logged[-1]["train/trace_cut_fraction"] < 1.0  # epsilon-greedy takes some non-greedy actions
 
 
-def test_n_steps_cannot_be_combined_with_lambda():
-    with pytest.raises(ValueError, match=r"n_steps.*mc_mixing='lambda'"):
-        OffOnDQN("MlpPolicy", "CartPole-v1", n_steps=3, **LAMBDA)
-
-
 @pytest.mark.parametrize(
     "name, value",
     [("lambda_block_size", 0), ("lambda_block_size", 2.5), ("lambda_refresh_interval", 0), ("lambda_block_size", True)],

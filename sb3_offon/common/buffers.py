@@ -347,30 +347,52 @@ class OffOnBufferMixin:
         kept = self.buffer_size - (1 if self.optimize_memory_usage else 0)
         return self._n_adds - added_at <= kept
 
-    def lambda_inputs(self, slots: np.ndarray, envs: np.ndarray, env: VecNormalize | None = None) -> dict[str, Any]:
+    def lambda_inputs(
+        self, slots: np.ndarray, envs: np.ndarray, gamma: float, env: VecNormalize | None = None
+    ) -> dict[str, Any]:
         """
         What the lambda-return recursion needs of the transitions at ``(slots, envs)``, as NumPy arrays.
 
-        :return: ``rewards`` (float32, normalised as ``sample()`` normalises them), ``next_actions`` (-1: the episode
-            did not go on from this transition: it ended, was cut by a reset, or this is its newest transition),
-            ``terminated`` (ended by termination, not by a time limit), ``running_newest`` (the newest transition of an
-            episode still running), ``next_observations`` (normalised as ``sample()`` normalises them)
+        Each transition t is read as the window of the buffer's ``n_steps`` (1 for a one-step buffer) steps that its
+        n-step TD target spans: from t to e = t + k - 1, where k = n_steps unless the episode did not go on after an
+        earlier step (it ended, was cut by a reset, or that step is the newest of an episode still running), as in
+        SB3's ``NStepReplayBuffer``; the fields below ending in "at e" are those of the window's last transition.
+
+        :param gamma: the discount of the rewards within a window
+        :return: ``rewards`` (sum over the window of gamma^i r_{t+i}, the rewards normalised as ``sample()`` normalises
+            them), ``discounts`` (gamma^k), ``next_actions`` (at e; -1: the episode did not go on from e, always the
+            case when k < n_steps), ``terminated`` (e ended its episode by termination, not by a time limit),
+            ``running_newest`` (e is the newest transition of an episode still running), ``next_observations``
+            (s_{t+k}, normalised as ``sample()`` normalises them)
         """
+        n_steps = getattr(self, "n_steps", 1)
+        offsets = np.arange(n_steps)
+        window = (slots[:, None] + offsets) % self.buffer_size
+        # The window stops at its first step whose episode did not go on (recorded next action -1): an episode's end,
+        # a reset, or the newest transition; so it never reaches past the newest transition into older data
+        lengths = np.full(len(slots), n_steps)
+        if n_steps > 1:
+            stops = self.next_actions[window[:, :-1], envs[:, None]] < 0
+            lengths = np.where(stops.any(axis=1), stops.argmax(axis=1) + 1, n_steps)
+        ends = window[np.arange(len(slots)), lengths - 1]
+        window_rewards = self._normalize_reward(self.rewards[window, envs[:, None]], env)  # type: ignore[attr-defined]
+        rewards = np.where(offsets < lengths[:, None], window_rewards * gamma**offsets, 0.0).sum(axis=1)
         if self.optimize_memory_usage:
-            next_obs = self.observations[(slots + 1) % self.buffer_size, envs]
+            next_obs = self.observations[(ends + 1) % self.buffer_size, envs]
         elif isinstance(self.next_observations, dict):
-            next_obs = {key: value[slots, envs] for key, value in self.next_observations.items()}
+            next_obs = {key: value[ends, envs] for key, value in self.next_observations.items()}
         else:
-            next_obs = self.next_observations[slots, envs]
-        dones = self.dones[slots, envs]  # type: ignore[attr-defined]
-        timeouts = self.timeouts[slots, envs]  # type: ignore[attr-defined]
+            next_obs = self.next_observations[ends, envs]
+        dones = self.dones[ends, envs]  # type: ignore[attr-defined]
+        timeouts = self.timeouts[ends, envs]  # type: ignore[attr-defined]
         newest_slot = (self.pos - 1) % self.buffer_size
         running = self.episode_starts < self._n_adds
         return {
-            "rewards": self._normalize_reward(self.rewards[slots, envs], env),  # type: ignore[attr-defined]
-            "next_actions": self.next_actions[slots, envs],
+            "rewards": rewards,
+            "discounts": gamma ** lengths.astype(np.float64),
+            "next_actions": self.next_actions[ends, envs],
             "terminated": (dones * (1 - timeouts)) > 0,
-            "running_newest": (slots == newest_slot) & running[envs],
+            "running_newest": (ends == newest_slot) & running[envs],
             "next_observations": self._normalize_obs(next_obs, env),  # type: ignore[attr-defined]
         }
 

@@ -12,6 +12,12 @@ For a transition t (``gamma`` the discount, ``lam`` = delta1, ``delta2`` the tra
 
 with V(s) = max_a Q_target(s, a). Each G_t is x_t + a_t * G_{t+1} with x_t and a_t known once V is: a linear recurrence,
 run backwards for all blocks at once by :func:`backward_recurrence`.
+
+With an n-step buffer (``n_steps`` = n > 1), the steps above are n-step windows, as in n-step DQN: r_t becomes
+R_t = sum_{i<k} gamma^i r_{t+i} over the k <= n steps of t's window (k < n where its episode did not go on), gamma
+becomes gamma^k, s_{t+1} becomes s_{t+k}, and the trace goes on to G_{t+n} with c_{t+n} (the action recorded at s_{t+n}
+against the greedy one there): the lambda-return over the n-, 2n-, 3n-step returns, whose lambda = 0 end is n-step DQN's
+target. Actions inside a window are not checked against the greedy policy, as n-step DQN does not check them.
 """
 
 from collections.abc import Callable
@@ -26,9 +32,9 @@ from sb3_offon.common.buffers import OffOnBufferMixin
 TargetValueFn = Callable[[Any], tuple[np.ndarray, np.ndarray]]
 
 
-def backward_recurrence(inputs: np.ndarray, coefficients: np.ndarray) -> np.ndarray:
+def backward_recurrence(inputs: np.ndarray, coefficients: np.ndarray, stride: int = 1) -> np.ndarray:
     """
-    y_t = x_t + a_t * y_{t+1} along the last axis, with y = 0 past the end, for every row at once.
+    y_t = x_t + a_t * y_{t+stride} along the last axis, with y = 0 past the end, for every row at once.
 
     The coefficients vary from step to step (with Peng's and intermediate trace cuts, a_t takes any value in
     [0, gamma * lam]), so a constant-coefficient filter (``scipy.signal.lfilter``) does not apply. Each step is the
@@ -36,10 +42,25 @@ def backward_recurrence(inputs: np.ndarray, coefficients: np.ndarray) -> np.ndar
     times (a Hillis-Steele scan) gives every y_t in O(T log T) vectorised operations, with no Python loop over steps.
     A coefficient of 0 (an episode's end, a cut trace) starts a new segment.
 
+    With a stride s > 1, the steps t, t + s, t + 2s, ... form s interleaved recurrences of stride 1: the last axis is
+    padded to a multiple of s and folded so that each becomes a row of its own.
+
     :param inputs: x, shaped (..., T)
     :param coefficients: a, the same shape
+    :param stride: s, how far ahead each step's successor lies
     :return: y as float64, the same shape
     """
+    if stride > 1:
+        length = np.shape(inputs)[-1]
+        padding = [(0, 0)] * (np.ndim(inputs) - 1) + [(0, -length % stride)]
+
+        def fold(array: np.ndarray) -> np.ndarray:  # (..., T) -> (..., s, ceil(T / s)): row r holds t = r, r + s, ...
+            padded = np.pad(np.asarray(array, dtype=np.float64), padding)
+            return np.swapaxes(padded.reshape(*padded.shape[:-1], padded.shape[-1] // stride, stride), -1, -2)
+
+        folded = backward_recurrence(fold(inputs), fold(coefficients))
+        unfolded = np.swapaxes(folded, -1, -2)
+        return unfolded.reshape(*unfolded.shape[:-2], unfolded.shape[-2] * stride)[..., :length]
     values = np.array(inputs, dtype=np.float64)
     spans = np.array(coefficients, dtype=np.float64)
     length = values.shape[-1]
@@ -157,7 +178,8 @@ def compute_lambda_returns(
     :param buffer: the Off-On replay buffer
     :param target_values: V and the greedy actions of the target network, for a batch of next observations
     :param n_wanted: how many transitions to cover (the whole buffer, in one block per env, if it holds no more)
-    :param block_size: the length of a block: the trace of a block's last transition is cut there (bootstrapped)
+    :param block_size: the length of a block: the trace of a block's last transition is cut there (bootstrapped; with
+        n-step windows, of each transition whose successor n steps on lies past the block's end)
     :param gamma: the discount factor
     :param lam: lambda (delta1)
     :param qlearning_prob: delta2: the trace weight after a non-greedy action is 1 - delta2
@@ -175,17 +197,19 @@ def compute_lambda_returns(
     slots = ((oldest + chronological) % buffer.buffer_size)[valid]
     envs = np.broadcast_to(block_envs[:, None], valid.shape)[valid]
 
-    inputs = buffer.lambda_inputs(slots, envs, env)
+    inputs = buffer.lambda_inputs(slots, envs, gamma, env)
     next_values, greedy_actions = target_values(inputs["next_observations"])
     next_actions = inputs["next_actions"].reshape(-1)
+    # Where the trace goes on: the next transition (one-step buffer) or the one after the n-step window
+    stride = getattr(buffer, "n_steps", 1)
 
-    # In the blocks' padded layout: a transition's trace goes on to the next one if its episode did and the next one is
-    # in the block
+    # In the blocks' padded layout: a transition's trace goes on to the one `stride` steps later if its episode went on
+    # past its window and that transition is in the block
     goes_on = np.zeros(valid.shape, dtype=bool)
     goes_on[valid] = next_actions >= 0
-    goes_on[:, :-1] &= valid[:, 1:]
-    goes_on[:, -1] = False
-    trace = np.ones(valid.shape)  # c_{t+1}
+    goes_on[:, :-stride] &= valid[:, stride:]
+    goes_on[:, -stride:] = False
+    trace = np.ones(valid.shape)  # c_{t+1} (c_{t+n} with n-step windows)
     trace[valid] = np.where(greedy_actions == next_actions, 1.0, 1.0 - qlearning_prob)
     no_value_after = inputs["terminated"]
     if cut_is_terminal:
@@ -194,8 +218,12 @@ def compute_lambda_returns(
 
     padded_values, padded_tail, rewards = np.zeros(valid.shape), np.zeros(valid.shape), np.zeros(valid.shape)
     padded_values[valid], padded_tail[valid], rewards[valid] = next_values, tail, inputs["rewards"]
+    discounts = np.ones(valid.shape)  # gamma, or gamma^k over a window of k steps
+    discounts[valid] = inputs["discounts"]
     bootstrap = np.where(goes_on, (1.0 - lam * trace) * padded_values, padded_tail)
-    returns = backward_recurrence(rewards + gamma * bootstrap, np.where(goes_on, gamma * lam * trace, 0.0))
+    returns = backward_recurrence(
+        rewards + discounts * bootstrap, np.where(goes_on, discounts * lam * trace, 0.0), stride=stride
+    )
 
     n_goes_on = int(np.count_nonzero(goes_on))
     trace_cut_fraction = float(np.count_nonzero(goes_on & (trace < 1.0))) / n_goes_on if n_goes_on else 0.0

@@ -122,8 +122,12 @@ class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, DQN):
       bootstraps as the newest of a running episode does (a truncated lambda-return, as in DQN(lambda)).
     - ``mc_truncation``: ``"bootstrap"`` and ``"drop"`` end a cut episode's trace with gamma * V(s_T) from the target
       network of the refresh (the lambda-return there is the one-step TD target, so no return is left unknown);
-      ``"terminal"`` ends it with 0, as after a termination. ``sarsa_target`` and ``n_steps`` play no part
-      (``n_steps > 1`` is a ``ValueError``: lambda-returns already blend every horizon).
+      ``"terminal"`` ends it with 0, as after a termination. ``sarsa_target`` plays no part.
+    - ``n_steps`` > 1: the steps of the recursion are n-step windows, as in n-step DQN: r_t becomes the discounted sum
+      of the rewards of t's window (up to n steps, fewer where the episode did not go on), gamma becomes gamma^k for a
+      window of k steps, s_{t+1} becomes s_{t+k}, and the trace goes on to G_{t+n} with c_{t+n}. This is the
+      lambda-return over the n-, 2n-, 3n-step returns; lambda = 0 gives n-step DQN's target. As in n-step DQN, the
+      actions inside a window are not checked against the greedy policy.
     - Logged: ``train/lambda`` and ``train/trace_cut_fraction``, the share of the continuations whose trace weight
       c_{t+1} was below 1 (non-greedy next actions with delta2 > 0), both of the refresh in use.
 
@@ -147,7 +151,8 @@ class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, DQN):
         that returns and TD targets share one discount; a different value given here is a ``ValueError``.
     :param optimize_memory_usage: Enable a memory efficient variant of the replay buffer at a cost of more complexity.
     :param n_steps: When n_step > 1, uses n-step returns for the TD targets; Sarsa then uses the action taken at the
-        n-th next state. Monte-Carlo returns are unaffected.
+        n-th next state. Monte-Carlo returns are unaffected. With ``mc_mixing="lambda"``, the lambda-return is taken
+        over n-step returns (see above).
     :param target_update_interval: update the target network every ``target_update_interval`` environment steps.
     :param exploration_fraction: fraction of entire training period over which the exploration rate is reduced
     :param exploration_initial_eps: initial value of random action probability
@@ -324,11 +329,6 @@ class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, DQN):
                 continue
             if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral) or value < 1:
                 raise ValueError(f"`{name}` must be a positive integer{' or None' if allow_none else ''}, got {value!r}")
-        if self.mc_mixing == "lambda" and self.n_steps > 1:
-            raise ValueError(
-                f"`n_steps` > 1 ({self.n_steps}) cannot be combined with `mc_mixing='lambda'`: lambda-returns already "
-                "blend the returns of every horizon (set n_steps=1)"
-            )
 
     def _setup_model(self) -> None:
         self._check_offon_arguments()
