@@ -4,7 +4,7 @@ Benchmark runner: a grid of algorithms x environments x seeds, each run being ``
 Every run goes through the same code path as the command line (rl-baselines3-zoo's ``train`` with the sb3_offon
 algorithms registered), in its own subprocess: the zoo's ``train()`` parses ``sys.argv`` and holds global state, and a
 subprocess keeps runs isolated and makes a crash visible as a return code. Each run trains with one torch thread on the
-CPU and evaluates the deterministic policy every ``--eval-freq`` steps (the zoo's ``EvalCallback``).
+CPU (``--threads`` for more) and evaluates the deterministic policy every ``--eval-freq`` steps (the zoo's ``EvalCallback``).
 
 Hyperparameter sets: ``--set tuned`` reads the bundled ``hyperparams/{algo}.yml`` (the zoo's tuned DQN settings for
 every variant), ``--set paper`` the paper's settings in ``hyperparams/paper/{algo}.yml`` (``-conf paper``).
@@ -132,6 +132,13 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         help="torch device of the runs (default: cpu for MlpPolicy runs, where one thread each beats a shared GPU; "
         "auto, the GPU if there is one, for CNN and other policies)",
     )
+    parser.add_argument(
+        "--threads",
+        type=int,
+        default=1,
+        help="torch threads of each run (default: 1, one core a run; more shortens a run that must end within a "
+        "time limit, such as QR-DQN on LunarLander-v3, at some cost in throughput)",
+    )
     parser.add_argument("--timeout", type=float, default=None, help="seconds after which a run is killed (and failed)")
     parser.add_argument("--force", action="store_true", help="redo finished runs that were made with other settings")
     parser.add_argument("--dry-run", action="store_true", help="list the runs and their commands, run nothing")
@@ -187,6 +194,7 @@ def build_specs(args: argparse.Namespace) -> list[dict]:
                         "eval_episodes": args.eval_episodes,
                         "hyperparams": hyperparams,
                         "device": args.device or default_device(entries[env].get("policy", "MlpPolicy")),
+                        "threads": args.threads,
                         "timeout": args.timeout,
                     }
                 )
@@ -207,7 +215,8 @@ def train_command(spec: dict, log_folder: str) -> list[str]:
     """The ``python -m sb3_offon.train`` command of a run (without the interpreter)."""
     command = ["-m", "sb3_offon.train", "--algo", spec["algo"], "--env", spec["env"], "--seed", str(spec["seed"])]
     command += ["-f", log_folder, "-n", str(spec["n_timesteps"]), "--eval-freq", str(spec["eval_freq"])]
-    command += ["--eval-episodes", str(spec["eval_episodes"]), "--num-threads", "1", "--device", spec["device"]]
+    threads = str(spec.get("threads", 1))  # specs of runs made before --threads existed: one thread
+    command += ["--eval-episodes", str(spec["eval_episodes"]), "--num-threads", threads, "--device", spec["device"]]
     if spec["set"] != "tuned":  # tuned: the bundled {algo}.yml is sb3_offon.train's default
         command += ["-conf", spec["set"]]
     if spec["hyperparams"]:
@@ -229,8 +238,9 @@ def run_one(spec: dict) -> dict:
     """
     scratch = Path(tempfile.mkdtemp(prefix=f"offon_{spec['algo']}_{spec['env']}_{spec['seed']}_"))
     command = train_command(spec, "logs")
-    # One thread per run, already at import time (torch.set_num_threads comes later, from --num-threads)
-    environment = {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+    # The run's threads, already at import time (torch.set_num_threads comes later, from --num-threads)
+    threads = str(spec.get("threads", 1))
+    environment = {**os.environ, "OMP_NUM_THREADS": threads, "MKL_NUM_THREADS": threads}
     started, start = datetime.now(timezone.utc), time.perf_counter()
     returncode = None
     with open(scratch / "train.log", "w") as log:
@@ -415,7 +425,7 @@ def run_ray(specs: list[dict], workers: int, address: str | None) -> Iterator[di
     if run_one.__module__ != "__main__":
         ray.cloudpickle.register_pickle_by_value(sys.modules[run_one.__module__])
     task = ray.remote(num_cpus=1, max_retries=0)(run_one)
-    pending = {task.remote(spec): spec for spec in specs}
+    pending = {task.options(num_cpus=spec.get("threads", 1)).remote(spec): spec for spec in specs}
     try:
         while pending:
             ready, _ = ray.wait(list(pending), num_returns=1)

@@ -95,6 +95,25 @@ def test_mlp_runs_train_on_the_cpu_unless_told_otherwise(tmp_path: Path):
         assert all(f"--device {device}" in line for line in commands)
 
 
+def test_threads_per_run(tmp_path: Path):
+    for extra, threads in [((), "1"), (("--threads", "2"), "2")]:
+        commands = train_commands(check(benchmark(tmp_path, "--dry-run", "--seeds", "1", *extra)))
+        assert commands and all(f"--num-threads {threads}" in line for line in commands)
+    module = load_script("benchmark")
+    spec = module.build_specs(
+        module.parse_args(["--set", "tuned", "--envs", "CartPole-v1", "--seeds", "1", "--threads", "2"])
+    )[0]
+    assert spec["threads"] == 2
+
+    def threads_of(spec: dict) -> str:
+        command = module.train_command(spec, "logs")
+        return command[command.index("--num-threads") + 1]
+
+    assert threads_of(spec) == "2"
+    del spec["threads"]  # a run recorded before --threads existed ran on one thread
+    assert threads_of(spec) == "1"
+
+
 def load_script(name: str):
     spec = importlib.util.spec_from_file_location(f"{name}_script", SCRIPTS / f"{name}.py")
     module = importlib.util.module_from_spec(spec)
