@@ -211,12 +211,16 @@ def run_dir(root: Path, spec: dict) -> Path:
     return root / spec.get("grid", spec["set"]) / spec["algo"] / f"{spec['env']}_{spec['seed']}"
 
 
+def run_threads(spec: dict) -> str:
+    """The torch threads of a run (specs of runs made before ``--threads`` existed have none: one thread)."""
+    return str(spec.get("threads", 1))
+
+
 def train_command(spec: dict, log_folder: str) -> list[str]:
     """The ``python -m sb3_offon.train`` command of a run (without the interpreter)."""
     command = ["-m", "sb3_offon.train", "--algo", spec["algo"], "--env", spec["env"], "--seed", str(spec["seed"])]
     command += ["-f", log_folder, "-n", str(spec["n_timesteps"]), "--eval-freq", str(spec["eval_freq"])]
-    threads = str(spec.get("threads", 1))  # specs of runs made before --threads existed: one thread
-    command += ["--eval-episodes", str(spec["eval_episodes"]), "--num-threads", threads, "--device", spec["device"]]
+    command += ["--eval-episodes", str(spec["eval_episodes"]), "--num-threads", run_threads(spec), "--device", spec["device"]]
     if spec["set"] != "tuned":  # tuned: the bundled {algo}.yml is sb3_offon.train's default
         command += ["-conf", spec["set"]]
     if spec["hyperparams"]:
@@ -239,8 +243,7 @@ def run_one(spec: dict) -> dict:
     scratch = Path(tempfile.mkdtemp(prefix=f"offon_{spec['algo']}_{spec['env']}_{spec['seed']}_"))
     command = train_command(spec, "logs")
     # The run's threads, already at import time (torch.set_num_threads comes later, from --num-threads)
-    threads = str(spec.get("threads", 1))
-    environment = {**os.environ, "OMP_NUM_THREADS": threads, "MKL_NUM_THREADS": threads}
+    environment = {**os.environ, "OMP_NUM_THREADS": run_threads(spec), "MKL_NUM_THREADS": run_threads(spec)}
     started, start = datetime.now(timezone.utc), time.perf_counter()
     returncode = None
     with open(scratch / "train.log", "w") as log:
