@@ -243,7 +243,8 @@ def run_one(spec: dict) -> dict:
     scratch = Path(tempfile.mkdtemp(prefix=f"offon_{spec['algo']}_{spec['env']}_{spec['seed']}_"))
     command = train_command(spec, "logs")
     # The run's threads, already at import time (torch.set_num_threads comes later, from --num-threads)
-    environment = {**os.environ, "OMP_NUM_THREADS": run_threads(spec), "MKL_NUM_THREADS": run_threads(spec)}
+    threads = run_threads(spec)
+    environment = {**os.environ, "OMP_NUM_THREADS": threads, "MKL_NUM_THREADS": threads}
     started, start = datetime.now(timezone.utc), time.perf_counter()
     returncode = None
     with open(scratch / "train.log", "w") as log:
@@ -428,7 +429,7 @@ def run_ray(specs: list[dict], workers: int, address: str | None) -> Iterator[di
     if run_one.__module__ != "__main__":
         ray.cloudpickle.register_pickle_by_value(sys.modules[run_one.__module__])
     task = ray.remote(num_cpus=1, max_retries=0)(run_one)
-    pending = {task.options(num_cpus=spec.get("threads", 1)).remote(spec): spec for spec in specs}
+    pending = {task.options(num_cpus=int(run_threads(spec))).remote(spec): spec for spec in specs}
     try:
         while pending:
             ready, _ = ray.wait(list(pending), num_returns=1)

@@ -6,12 +6,23 @@ import pytest
 from gymnasium import spaces
 from stable_baselines3.common.buffers import NStepReplayBuffer
 from stable_baselines3.common.env_util import make_vec_env
-from test_lambda_returns import GAMMA, N_ACTIONS, OBS_SPACE, SMALL, fake_target, model_target, random_episodes, step
+from test_lambda_returns import (
+    GAMMA,
+    N_ACTIONS,
+    OBS_SPACE,
+    SMALL,
+    cache_of,
+    fake_target,
+    model_target,
+    random_episodes,
+    returns_by_slot,
+    step,
+)
+from test_lambda_returns import assert_matches_reference as assert_matches
 
 from sb3_offon import OffOnDQN, OffOnNStepReplayBuffer
-from sb3_offon.offon_dqn.lambda_returns import backward_recurrence, choose_blocks, compute_lambda_returns
+from sb3_offon.offon_dqn.lambda_returns import backward_recurrence, choose_blocks
 
-LAM = 0.5
 LAMBDA = dict(mc_mixing="lambda", mc_initial_prob=0.9, mc_final_prob=0.9, qlearning_initial_prob=0.0, qlearning_final_prob=0.0)
 
 
@@ -19,17 +30,6 @@ def make_buffer(n_steps, buffer_size=16, n_envs=1):
     return OffOnNStepReplayBuffer(
         buffer_size * n_envs, OBS_SPACE, spaces.Discrete(N_ACTIONS), "cpu", n_envs=n_envs, n_steps=n_steps, gamma=GAMMA
     )
-
-
-def cache_of(buffer, lam=LAM, qlearning_prob=1.0, cut_is_terminal=False, n_wanted=10**9, block_size=100):
-    return compute_lambda_returns(
-        buffer, fake_target, n_wanted, block_size, GAMMA, lam, qlearning_prob, cut_is_terminal, key=0
-    )
-
-
-def returns_by_slot(cache, env=0):
-    order = np.argsort(cache.slots[cache.envs == env])
-    return cache.returns[cache.envs == env][order]
 
 
 def reference_nstep_lambda_returns(buffer, target, lam, qlearning_prob, cut_is_terminal=False, same_block=None, gamma=GAMMA):
@@ -73,12 +73,6 @@ def reference_nstep_lambda_returns(buffer, target, lam, qlearning_prob, cut_is_t
             by_index[index] = g
             returns[(slot, env)] = g
     return returns
-
-
-def assert_matches(cache, reference):
-    assert len(cache) == len(reference)
-    for slot, env, value in zip(cache.slots, cache.envs, cache.returns, strict=True):
-        assert value == pytest.approx(reference[(int(slot), int(env))], rel=1e-6, abs=1e-6), (slot, env)
 
 
 def five_steps(buffer, actions=(0, 1, 2, 3, 4), dones=None, truncated=None):
