@@ -334,6 +334,51 @@ def test_refresh_interval_in_env_steps():
     assert keys == {1, 2, 3, 4}
 
 
+@pytest.mark.parametrize("n_envs", [1, 2])
+def test_a_whole_buffer_cache_is_outgrown_once_the_buffer_has_doubled(n_envs):
+    buffer = make_buffer(buffer_size=16, n_envs=n_envs)
+    random_episodes(buffer, 3)
+    whole = cache_of(buffer)
+    assert whole.whole_buffer and len(whole) == 3 * n_envs
+    random_episodes(buffer, 2, seed=1)  # 5 steps per env stored, fewer than twice the 3 cached
+    assert not whole.outgrown(buffer)
+    random_episodes(buffer, 1, seed=2)  # 6: twice as many
+    assert whole.outgrown(buffer)
+    np.random.seed(0)
+    sampled = cache_of(buffer, n_wanted=2, block_size=2)  # fewer wanted than stored: blocks, not the whole buffer
+    assert not sampled.whole_buffer
+    random_episodes(buffer, 10, seed=3)
+    assert not sampled.outgrown(buffer), "a cache of blocks waits for the next refresh however the buffer grows"
+    full = cache_of(buffer)  # 16 steps per env: the ring is full and cannot double any more
+    random_episodes(buffer, 40, seed=4)
+    assert full.whole_buffer and len(full) == 16 * n_envs and not full.outgrown(buffer)
+
+
+def test_a_young_buffer_is_not_starved_by_rare_target_updates(monkeypatch):
+    # SB3's default target_update_interval: one refresh key for the whole run. Training starts at step 24 (the first
+    # rollout end past learning_starts=20); without the growth refresh, all training would be on those 24 transitions.
+    model = OffOnDQN(
+        "MlpPolicy",
+        "CartPole-v1",
+        seed=0,
+        buffer_size=10_000,
+        **{**SMALL, "learning_starts": 20, "target_update_interval": 10_000},
+        **LAMBDA,
+    )
+    computed = []
+    original = lambda_training.compute_lambda_returns
+
+    def recording(*args, **kwargs):
+        computed.append(original(*args, **kwargs))
+        return computed[-1]
+
+    monkeypatch.setattr(lambda_training, "compute_lambda_returns", recording)
+    model.learn(200)
+    assert [len(cache) for cache in computed] == [24, 48, 96, 192], "afresh each time the buffer has doubled"
+    assert all(cache.whole_buffer and cache.key == 0 for cache in computed), "with the same target network"
+    assert model._lambda_cache is computed[-1]
+
+
 def test_cache_size_follows_the_samples_trained_until_the_next_refresh():
     model = OffOnDQN(
         "MlpPolicy",

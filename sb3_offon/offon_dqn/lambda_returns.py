@@ -87,6 +87,7 @@ class LambdaReturnCache:
     :param lam: lambda (delta1) of the refresh
     :param qlearning_prob: delta2 of the refresh
     :param trace_cut_fraction: the share of the continuations whose trace weight c_{t+1} was below 1
+    :param whole_buffer: whether they are every transition stored at the refresh (each env's history one block)
     """
 
     slots: np.ndarray
@@ -97,11 +98,22 @@ class LambdaReturnCache:
     lam: float
     qlearning_prob: float
     trace_cut_fraction: float
+    whole_buffer: bool = False
     order: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     cursor: int = 0
 
     def __len__(self) -> int:
         return len(self.returns)
+
+    def outgrown(self, buffer: OffOnBufferMixin) -> bool:
+        """
+        Whether the cache held the whole buffer and the buffer now holds at least twice as many transitions: then the
+        transitions added since outnumber the cached ones, and training on the cache alone would starve them.
+        """
+        if not self.whole_buffer:
+            return False
+        _, n_stored, first = buffer.chronology()
+        return buffer.n_envs * (n_stored - first) >= 2 * len(self)
 
     def draw(self, n_samples: int, buffer: OffOnBufferMixin) -> np.ndarray | None:
         """
@@ -237,4 +249,5 @@ def compute_lambda_returns(
         lam=lam,
         qlearning_prob=qlearning_prob,
         trace_cut_fraction=trace_cut_fraction,
+        whole_buffer=n_wanted >= buffer.n_envs * (n_stored - first),
     )

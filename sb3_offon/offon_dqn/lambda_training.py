@@ -122,11 +122,15 @@ class LambdaTrainingMixin:
         return self._n_calls // max(self.target_update_interval // self.n_envs, 1)
 
     def _refreshed_lambda_cache(self, n_samples: int) -> LambdaReturnCache:
-        """The cached lambda-returns, computed afresh if there are none yet or the refresh key changed."""
-        key = self._lambda_refresh_key()
-        if self._lambda_cache is not None and self._lambda_cache.key == key:
-            return self._lambda_cache
+        """
+        The cached lambda-returns, computed afresh if there are none yet, the refresh key changed, or the cache held the
+        whole buffer and the buffer has doubled since (a young buffer, with the same target network).
+        """
         assert isinstance(self.replay_buffer, OffOnBufferMixin)
+        key = self._lambda_refresh_key()
+        cache = self._lambda_cache
+        if cache is not None and cache.key == key and not cache.outgrown(self.replay_buffer):
+            return cache
         self._lambda_cache = compute_lambda_returns(
             self.replay_buffer,
             self._target_values_and_actions,

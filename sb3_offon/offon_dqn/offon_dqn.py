@@ -114,7 +114,11 @@ class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, DQN):
       from these cached returns. The network behind a cached value is the current target network with the default
       refresh (it does not change between two of its updates), and at most ``lambda_refresh_interval`` env steps
       old otherwise; lambda and delta2 are the schedules' values at the refresh. Transitions added since the last
-      refresh wait for the next one, and cached ones overwritten since are skipped.
+      refresh wait for the next one, and cached ones overwritten since are skipped. One exception keeps a young
+      buffer from starving: a cache that holds the whole buffer is computed afresh (same target network) once the
+      buffer holds twice as many transitions, so at least half of what is stored is trained on, and the recomputations
+      while it grows cost at most twice its final size. Without it, with SB3's default ``target_update_interval`` of
+      10,000 and ``learning_starts`` of 100, a run's first 10,000 steps would train on its first 100 transitions only.
     - Cost: one target network pass per computed return, which replaces the pass per sampled transition of the
       other modes, plus O(n log n) NumPy work for n returns; independent of ``buffer_size`` except for picking the
       blocks (O(buffer_size / lambda_block_size)). When the buffer holds no more than a refresh needs, each env's
