@@ -24,6 +24,12 @@ a cell lacks seeds (the lines are then an interim view, not a decision). Part 1 
 once both have all ten seeds on a task and the interval there lies wholly below zero, the rule has failed whatever the
 other runs say, and the verdict is "does not hold" before the grid is complete (added 2026-11-26, with no task's
 DQN and choice cells complete; the rule is unchanged, only the moment it can be read).
+
+Part 2 can be read early too, in one case (added 2026-11-26, ninth session, while QR-DQN's LunarLander-v3 runs, about
+3 h each on this VM, were still to come): when DQN's, n-step DQN's and the choice's runs are all in and the runs still
+missing are another algorithm's on one task. Those runs enter part 2 only through that task's min-max normalisation,
+which they can only widen; ``auc_gap_bounds`` bounds the choice's IQM minus n-step DQN's over every normalisation they
+could produce. If the bounds are both above zero (or both below), no run still to come can change the answer.
 """
 
 import argparse
@@ -31,6 +37,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from scipy import stats
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import run_stats
@@ -41,6 +48,76 @@ ALGOS = (BASELINE, NSTEP, "qrdqn", CHOICE)
 FRESH_SEEDS = range(20, 30)
 STEPS_RATIO_AT_MOST = 0.7
 FINAL_ABOVE_AT_LEAST = 2
+# The grid of auc_gap_bounds: positions of the open task's present AUC range in a widened one, this far apart
+GAP_GRID_STEP = 0.002
+
+
+def pooled_iqm(columns: np.ndarray) -> np.ndarray:
+    """rliable's IQM (``metrics.aggregate_iqm``: SciPy's 25% trimmed mean of all scores) of each row of ``columns``."""
+    return stats.trim_mean(columns, 0.25, axis=-1)
+
+
+def auc_gap_bounds(scores: dict, open_env: str, step: float = GAP_GRID_STEP) -> tuple[float, float]:
+    """
+    Bounds on the choice's IQM of normalised AUC minus n-step DQN's over every normalisation of ``open_env`` that runs
+    still to come there could produce (the other tasks' being final, and both algorithms' runs all in).
+
+    Runs to come can only widen ``open_env``'s AUC range [low, high] (the minimum and maximum over every run there) to
+    [low', high']. In it the present normalised scores y (in [0, 1]) become p + (q - p) * y, where p and q, the places
+    of low and high, can be any 0 <= p <= q <= 1 (p = q is the limit of a range that new runs widen without bound).
+    The gap is computed on a grid of (p, q) ``step`` apart. Every (p, q) lies within step / 2 of a grid point in each
+    coordinate, which moves each normalised score of the task by at most step / 2; sorting does not lengthen the sum of
+    the moves, so each algorithm's IQM (the mean of the middle half of its pooled scores) moves by at most (its runs on
+    the task / the size of that middle half) * step / 2. The grid's extremes widened by that much for both algorithms
+    therefore bound the gap over the whole triangle.
+
+    :param scores: ``scores[env][algo]["auc"]``; every algorithm present on an env counts in its range
+    :param open_env: the task whose runs are not all in
+    :param step: the grid step (its inverse a whole number)
+    :return: (lowest, highest) possible gap
+    """
+    columns: dict[str, list[np.ndarray]] = {CHOICE: [], NSTEP: []}
+    open_scores = {}
+    for env, by_algo in scores.items():
+        low = min(values["auc"].min() for values in by_algo.values())
+        span = max(values["auc"].max() for values in by_algo.values()) - low
+        for algo in columns:
+            normalised = (by_algo[algo]["auc"] - low) / span if span > 0 else np.full(len(by_algo[algo]["auc"]), 0.5)
+            if env == open_env:
+                open_scores[algo] = normalised
+            else:
+                columns[algo].append(normalised)
+    places = np.linspace(0.0, 1.0, round(1 / step) + 1)
+    p, q = (grid.ravel() for grid in np.meshgrid(places, places, indexing="ij"))
+    p, q = p[p <= q], q[p <= q]
+    iqm, slack = {}, 0.0
+    for algo, fixed in columns.items():
+        moved = p[:, None] + (q - p)[:, None] * open_scores[algo][None, :]
+        pooled = np.concatenate([np.broadcast_to(np.concatenate(fixed), (len(p), sum(map(len, fixed)))), moved], axis=1)
+        iqm[algo] = pooled_iqm(pooled)
+        n_pooled = pooled.shape[1]
+        n_middle = n_pooled - 2 * int(0.25 * n_pooled)
+        slack += len(open_scores[algo]) / n_middle * step / 2
+    gap = iqm[CHOICE] - iqm[NSTEP]
+    return float(gap.min() - slack), float(gap.max() + slack)
+
+
+def open_task(scores: dict) -> str | None:
+    """
+    The one task where runs are missing, if DQN's, n-step DQN's and the choice's are all in everywhere and the missing
+    runs are another algorithm's on that task alone (then part 2 can be bounded, ``auc_gap_bounds``); else None.
+    """
+    complete = len(FRESH_SEEDS)
+    if any(
+        len(scores.get(env, {}).get(algo, {}).get("auc", [])) < complete
+        for env in BENCHMARK_ENVS
+        for algo in (BASELINE, NSTEP, CHOICE)
+    ):
+        return None
+    open_envs = [
+        env for env in BENCHMARK_ENVS if any(len(scores[env].get(algo, {}).get("auc", [])) < complete for algo in ALGOS)
+    ]
+    return open_envs[0] if len(open_envs) == 1 else None
 
 
 def judge(runs: dict, scores: dict, reps: int) -> tuple[str, list[str]]:
@@ -117,6 +194,17 @@ def judge(runs: dict, scores: dict, reps: int) -> tuple[str, list[str]]:
         if failed_for_good:
             lines.append("Rule 1 failed on a task whose DQN and choice runs are all in: the remaining runs cannot change that")
             return "does not hold", lines
+        env = open_task(scores)
+        if env is None:
+            return "incomplete", lines
+        low, high = auc_gap_bounds(scores, env)
+        lines.append(
+            f"Rule 2 before {env}'s last runs: {CHOICE}'s IQM of normalised AUC minus {NSTEP}'s lies in "
+            f"[{low:+.4f}, {high:+.4f}] over every normalisation of {env} those runs could produce"
+        )
+        if low > 0 or high < 0:
+            lines.append(f"Rules 1 and 2 are decided: the runs still missing on {env} cannot change the verdict")
+            return ("holds" if final_not_below == tasks and low > 0 else "does not hold"), lines
         return "incomplete", lines
     return ("holds" if final_not_below == tasks and faster else "does not hold"), lines
 

@@ -853,10 +853,18 @@ def test_headtohead2_rule_from_hand_made_scores():
     # Slower than n-step DQN across the tasks: the rule fails on its second part
     verdict, lines = module.judge(*grid(even, dict(level, **{module.CHOICE: 4.0})), reps=300)
     assert verdict == "does not hold" and lines[-4].endswith("no") and lines[-3].endswith("missed"), lines
-    # A cell with nine seeds: no decision yet, and the aggregate waits
+    # QR-DQN's cell on one task with nine seeds: the aggregate waits, but part 2 can be bounded over whatever its last
+    # run shows (it only widens Acrobot-v1's range), and the choice's AUC is far above n-step DQN's everywhere
     verdict, lines = module.judge(*grid(even, level, n_seeds=9), reps=300)
-    assert verdict == "incomplete" and "still to run: qrdqn" in lines[3] and "waits until" in lines[4], lines
-    assert lines[-4].endswith("n-step DQN's: waits") and lines[-3].endswith("apart: waits"), lines
+    assert verdict == "holds" and "still to run: qrdqn" in lines[3] and "waits until" in lines[4], lines
+    assert lines[-6].endswith("n-step DQN's: waits") and lines[-5].endswith("apart: waits"), lines
+    assert lines[-2].startswith("Rule 2 before Acrobot-v1's last runs") and "cannot change" in lines[-1], lines
+    # ... and when the choice is level with n-step DQN except a little above on that task, a last run that widens its
+    # range far enough would make them level: no decision
+    runs, scores = grid(even, dict(level, **{module.CHOICE: 5.0}), n_seeds=9)
+    scores["Acrobot-v1"][module.CHOICE]["auc"] = scores["Acrobot-v1"][module.CHOICE]["auc"] + 0.5
+    verdict, lines = module.judge(runs, scores, reps=300)
+    assert verdict == "incomplete" and lines[-1].startswith("Rule 2 before Acrobot-v1's last runs"), lines
     # Part 1 failed on a task whose DQN and choice cells are complete: decided before QR-DQN's last run
     below = dict(even, **{"Acrobot-v1": -20.0})
     verdict, lines = module.judge(*grid(below, level, n_seeds=9), reps=300)
@@ -876,6 +884,45 @@ def test_headtohead2_rule_from_hand_made_scores():
     verdict, lines = module.judge(runs, scores, reps=300)
     assert verdict == "incomplete" and "+30.0 (one run) -> no interval yet;" in lines[3], lines
     assert lines[-5].endswith("4 of 4 tasks (all needed)"), lines
+
+
+def test_headtohead2_auc_gap_bounds_hold_whatever_the_missing_runs_show():
+    """The bounds of part 2 read early contain the gap that any completion of the open task gives."""
+    module = load_script("headtohead2_rule")
+    rng = np.random.default_rng(0)
+    envs = ["CartPole-v1", "MountainCar-v0", "LunarLander-v3", "Acrobot-v1"]
+    runs, scores = {}, {}
+    for env in envs:
+        for algo in module.ALGOS:
+            n_runs = 3 if (algo == "qrdqn" and env == "LunarLander-v3") else 10
+            runs.setdefault(env, {})[algo] = [
+                module.run_stats.Run(algo, env, seed, 100, np.array([100]), np.array([0.0]), None)
+                for seed in range(20, 20 + n_runs)
+            ]
+            auc = rng.normal(1.0 if algo == module.CHOICE else 0.0, 1.0, n_runs)
+            scores.setdefault(env, {})[algo] = {"final": auc, "auc": auc, "steps": np.ones(n_runs)}
+    assert module.open_task(scores) == "LunarLander-v3"
+    low, high = module.auc_gap_bounds(scores, "LunarLander-v3", step=0.01)
+    assert low < high
+    qrdqn = scores["LunarLander-v3"]["qrdqn"]["auc"]
+    # The seven runs to come: inside the present range, far outside it, or anywhere between
+    for scale in (0.1, 1.0, 10.0, 1e4):
+        completed = {env: dict(by_algo) for env, by_algo in scores.items()}
+        completed_runs = {env: dict(by_algo) for env, by_algo in runs.items()}
+        extra = rng.normal(0.0, scale, 7)
+        completed["LunarLander-v3"]["qrdqn"] = {key: np.concatenate([qrdqn, extra]) for key in ("final", "auc", "steps")}
+        completed_runs["LunarLander-v3"]["qrdqn"] = [
+            module.run_stats.Run("qrdqn", "LunarLander-v3", seed, 100, np.array([100]), np.array([0.0]), None)
+            for seed in range(20, 30)
+        ]
+        aggregate = module.run_stats.aggregates(completed_runs, completed, reps=10)
+        gap = aggregate["iqm_auc"][module.CHOICE][0] - aggregate["iqm_auc"][module.NSTEP][0]
+        assert low <= gap <= high, (scale, low, gap, high)
+    # The grid's extremes are reached to within the slack: the bounds are not vacuous
+    assert high - low < 2.0
+    # Missing runs of n-step DQN, or on two tasks: nothing to bound
+    scores["CartPole-v1"]["qrdqn"] = {key: values[:9] for key, values in scores["CartPole-v1"]["qrdqn"].items()}
+    assert module.open_task(scores) is None
 
 
 @pytest.mark.parametrize("rule, fresh", [("headtohead_rule", [10, 19]), ("headtohead2_rule", [20, 29])])
