@@ -11,6 +11,7 @@ from sb3_offon.common.buffers import (
     OffOnReplayBufferSamples,
 )
 from sb3_offon.offon_dqn import CnnPolicy, MlpPolicy, MultiInputPolicy, OffOnDQN
+from sb3_offon.presets import LAMBDA_CHOICE_TARGETS, PAPER_TARGETS
 from sb3_offon.variants import DQNMC, DQNSarsa
 
 # The version is written once, in version.txt (read by setuptools too, see pyproject.toml)
@@ -18,6 +19,8 @@ __version__ = (Path(__file__).parent / "version.txt").read_text(encoding="utf-8"
 
 __all__ = [
     "DQNMC",
+    "LAMBDA_CHOICE_TARGETS",
+    "PAPER_TARGETS",
     "CnnPolicy",
     "DQNSarsa",
     "MlpPolicy",

@@ -12,6 +12,10 @@ Algorithm      delta1 = P(Monte-Carlo target)         delta2 = P(Q-learning give
 ``OffOnDQN``   0.99 -> 0.01                           0.99 -> 0.01
 =============  =====================================  ==========================================
 
+(``OffOnDQN`` in that table is ``OffOnDQN(policy, env, **PAPER_TARGETS)``: its defaults are lambda-returns since
+issue 27.) DQNMC and DQNSarsa draw one target per sample, as in the paper (``mc_mixing="sample"``), whatever
+OffOnDQN's defaults are.
+
 Every OffOnDQN argument is accepted and can still be set, the probabilities included. ``load()`` restores the
 saved values, whatever these defaults are.
 """
@@ -22,6 +26,7 @@ from stable_baselines3.common.type_aliases import GymEnv
 from stable_baselines3.dqn.policies import DQNPolicy
 
 from sb3_offon.offon_dqn import OffOnDQN
+from sb3_offon.presets import PAPER_TARGETS
 
 
 class DQNMC(OffOnDQN):
@@ -31,8 +36,11 @@ class DQNMC(OffOnDQN):
 
     :param policy: The policy model to use (MlpPolicy, CnnPolicy, ...)
     :param env: The environment to learn from (if registered in Gym, can be str)
+    :param mc_initial_prob: initial delta1 (the paper's 0.99)
+    :param mc_final_prob: final delta1 (the paper's 0.01)
     :param qlearning_initial_prob: initial delta2 (1: Q-learning only)
     :param qlearning_final_prob: final delta2 (1: Q-learning only)
+    :param mc_mixing: how the Monte-Carlo target enters (``"sample"``: drawn with probability delta1, the paper's)
     :param kwargs: any other argument of :class:`sb3_offon.OffOnDQN`, by keyword
     """
 
@@ -41,15 +49,21 @@ class DQNMC(OffOnDQN):
         policy: str | type[DQNPolicy],
         env: GymEnv | str,
         *,
+        mc_initial_prob: float = PAPER_TARGETS["mc_initial_prob"],
+        mc_final_prob: float = PAPER_TARGETS["mc_final_prob"],
         qlearning_initial_prob: float = 1.0,
         qlearning_final_prob: float = 1.0,
+        mc_mixing: str = PAPER_TARGETS["mc_mixing"],
         **kwargs: Any,
     ) -> None:
         super().__init__(
             policy,
             env,
+            mc_initial_prob=mc_initial_prob,
+            mc_final_prob=mc_final_prob,
             qlearning_initial_prob=qlearning_initial_prob,
             qlearning_final_prob=qlearning_final_prob,
+            mc_mixing=mc_mixing,
             **kwargs,
         )
 
@@ -63,6 +77,9 @@ class DQNSarsa(OffOnDQN):
     :param env: The environment to learn from (if registered in Gym, can be str)
     :param mc_initial_prob: initial delta1 (0: no Monte-Carlo target)
     :param mc_final_prob: final delta1 (0: no Monte-Carlo target)
+    :param qlearning_initial_prob: initial delta2 (the paper's 0.99)
+    :param qlearning_final_prob: final delta2 (the paper's 0.01)
+    :param mc_mixing: how the Monte-Carlo target enters (``"sample"``, the paper's; with delta1 = 0 it never does)
     :param kwargs: any other argument of :class:`sb3_offon.OffOnDQN`, by keyword
     """
 
@@ -73,6 +90,9 @@ class DQNSarsa(OffOnDQN):
         *,
         mc_initial_prob: float = 0.0,
         mc_final_prob: float = 0.0,
+        qlearning_initial_prob: float = PAPER_TARGETS["qlearning_initial_prob"],
+        qlearning_final_prob: float = PAPER_TARGETS["qlearning_final_prob"],
+        mc_mixing: str = PAPER_TARGETS["mc_mixing"],
         **kwargs: Any,
     ) -> None:
         super().__init__(
@@ -80,5 +100,8 @@ class DQNSarsa(OffOnDQN):
             env,
             mc_initial_prob=mc_initial_prob,
             mc_final_prob=mc_final_prob,
+            qlearning_initial_prob=qlearning_initial_prob,
+            qlearning_final_prob=qlearning_final_prob,
+            mc_mixing=mc_mixing,
             **kwargs,
         )

@@ -16,7 +16,7 @@ from stable_baselines3.common.logger import KVWriter, Logger
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
-from sb3_offon import OffOnDictReplayBuffer, OffOnDQN, OffOnNStepReplayBuffer, OffOnReplayBuffer
+from sb3_offon import PAPER_TARGETS, OffOnDictReplayBuffer, OffOnDQN, OffOnNStepReplayBuffer, OffOnReplayBuffer
 from sb3_offon.common.buffers import OffOnReplayBufferSamples, discounted_returns
 
 SMALL = dict(
@@ -28,7 +28,18 @@ SMALL = dict(
     policy_kwargs=dict(net_arch=[16]),
     device="cpu",
 )
-Q_ONLY = dict(mc_initial_prob=0.0, mc_final_prob=0.0, qlearning_initial_prob=1.0, qlearning_final_prob=1.0)
+
+
+def paper_offon_dqn(*args, **kwargs) -> OffOnDQN:
+    """
+    OffOnDQN with the paper's coin-flip targets (``PAPER_TARGETS``), which this file tests, unless ``kwargs`` say
+    otherwise: OffOnDQN's own defaults are lambda-returns (tests/test_lambda_returns.py, tests/test_presets.py).
+    """
+    return OffOnDQN(*args, **{**PAPER_TARGETS, **kwargs})
+
+
+# SB3's DQN, bit for bit: the coin-flip mode with delta1 = 0 and delta2 = 1
+Q_ONLY = dict(mc_mixing="sample", mc_initial_prob=0.0, mc_final_prob=0.0, qlearning_initial_prob=1.0, qlearning_final_prob=1.0)
 
 
 def constant_probs(mc: float, qlearning: float) -> dict:
@@ -104,7 +115,7 @@ def max_target_q(model: OffOnDQN, observation: np.ndarray) -> float:
 @pytest.fixture
 def model():
     # A fresh model per test: tests set probabilities, the exploration rate and options on it
-    return OffOnDQN("MlpPolicy", "CartPole-v1", seed=0, **SMALL)
+    return paper_offon_dqn("MlpPolicy", "CartPole-v1", seed=0, **SMALL)
 
 
 def test_qlearning_target_at_mc_0_qlearning_1(model):
@@ -223,7 +234,7 @@ def test_n_step_discounts_are_respected(model):
 
 
 def test_schedules_decay_linearly_then_stay():
-    model = OffOnDQN(
+    model = paper_offon_dqn(
         "MlpPolicy",
         "CartPole-v1",
         mc_initial_prob=0.9,
@@ -289,7 +300,9 @@ def test_returns_in_training_match_rewards_and_truncation_bootstrap():
     env = DummyVecEnv([lambda limit=limit: Monitor(gym.make("CartPole-v1", max_episode_steps=limit)) for limit in (9, 40)])
     env.seed(1)
     # No gradient step before the end (learning_starts), so the target network is the same throughout
-    model = OffOnDQN("MlpPolicy", env, gamma=0.9, seed=1, exploration_final_eps=1.0, **{**SMALL, "learning_starts": 10_000})
+    model = paper_offon_dqn(
+        "MlpPolicy", env, gamma=0.9, seed=1, exploration_final_eps=1.0, **{**SMALL, "learning_starts": 10_000}
+    )
     model.learn(400)
     buffer = model.replay_buffer
     n = buffer.pos
@@ -317,7 +330,9 @@ def test_returns_in_training_match_rewards_and_truncation_bootstrap():
 def test_reward_normalisation_scales_returns_like_rewards():
     """The buffer keeps raw rewards and raw returns; VecNormalize's reward scale is applied to both at sampling."""
     venv = VecNormalize(DummyVecEnv([lambda: gym.make("CartPole-v1", max_episode_steps=15)]), norm_obs=False, gamma=0.9)
-    model = OffOnDQN("MlpPolicy", venv, gamma=0.9, seed=0, exploration_final_eps=1.0, **{**SMALL, "learning_starts": 10_000})
+    model = paper_offon_dqn(
+        "MlpPolicy", venv, gamma=0.9, seed=0, exploration_final_eps=1.0, **{**SMALL, "learning_starts": 10_000}
+    )
 
     def reward_scale() -> float:
         """What VecNormalize divides rewards by now."""
@@ -361,25 +376,25 @@ def test_reward_normalisation_scales_returns_like_rewards():
 
 
 def test_set_random_seed_reseeds_the_target_draws():
-    model = OffOnDQN("MlpPolicy", "CartPole-v1", seed=0, **SMALL)
+    model = paper_offon_dqn("MlpPolicy", "CartPole-v1", seed=0, **SMALL)
     model.learn(300)
     model.set_random_seed(5)
     assert model.target_rng.bit_generator.state == np.random.default_rng(5).bit_generator.state
 
 
 def test_terminal_truncation_mode_sets_no_value_function():
-    model = OffOnDQN("MlpPolicy", "CartPole-v1", mc_truncation="terminal", **SMALL)
+    model = paper_offon_dqn("MlpPolicy", "CartPole-v1", mc_truncation="terminal", **SMALL)
     assert model.replay_buffer.truncation_value_fn is None
-    assert OffOnDQN("MlpPolicy", "CartPole-v1", **SMALL).replay_buffer.truncation_value_fn is not None
+    assert paper_offon_dqn("MlpPolicy", "CartPole-v1", **SMALL).replay_buffer.truncation_value_fn is not None
 
 
 def test_drop_truncation_mode_sets_the_buffer_and_survives_a_buffer_reload(tmp_path):
-    model = OffOnDQN("MlpPolicy", "CartPole-v1", mc_truncation="drop", **SMALL)
+    model = paper_offon_dqn("MlpPolicy", "CartPole-v1", mc_truncation="drop", **SMALL)
     assert model.replay_buffer.drop_truncated_returns is True
     assert model.replay_buffer.truncation_value_fn is None
-    assert OffOnDQN("MlpPolicy", "CartPole-v1", **SMALL).replay_buffer.drop_truncated_returns is False
+    assert paper_offon_dqn("MlpPolicy", "CartPole-v1", **SMALL).replay_buffer.drop_truncated_returns is False
     model.save_replay_buffer(tmp_path / "buffer.pkl")
-    other = OffOnDQN("MlpPolicy", "CartPole-v1", **SMALL)
+    other = paper_offon_dqn("MlpPolicy", "CartPole-v1", **SMALL)
     other.load_replay_buffer(tmp_path / "buffer.pkl")
     assert other.replay_buffer.drop_truncated_returns is False, "the loading model's mc_truncation decides"
 
@@ -387,7 +402,7 @@ def test_drop_truncation_mode_sets_the_buffer_and_survives_a_buffer_reload(tmp_p
 def test_drop_truncation_keeps_only_returns_of_terminated_episodes():
     # CartPole cut at 20 steps: terminated episodes (the pole fell) get returns, truncated ones (20 steps) none
     env = gym.make("CartPole-v1", max_episode_steps=20)
-    model = OffOnDQN("MlpPolicy", env, mc_truncation="drop", gamma=0.9, seed=1, **SMALL)
+    model = paper_offon_dqn("MlpPolicy", env, mc_truncation="drop", gamma=0.9, seed=1, **SMALL)
     model.learn(400)
     buffer = model.replay_buffer
     ends = np.flatnonzero(buffer.dones[: buffer.pos, 0])
@@ -408,7 +423,7 @@ def test_drop_truncation_keeps_only_returns_of_terminated_episodes():
 
 def test_save_load_model_buffer_and_resume(tmp_path):
     kwargs = dict(constant_probs(0.4, 0.6), mc_mixing="convex", sarsa_target="expected", mc_truncation="terminal", loss="mse")
-    model = OffOnDQN("MlpPolicy", "CartPole-v1", seed=3, mc_fraction=0.5, qlearning_fraction=0.7, **kwargs, **SMALL)
+    model = paper_offon_dqn("MlpPolicy", "CartPole-v1", seed=3, mc_fraction=0.5, qlearning_fraction=0.7, **kwargs, **SMALL)
     model.learn(600)
     model.save(tmp_path / "model.zip")
     model.save_replay_buffer(tmp_path / "buffer.pkl")
@@ -438,14 +453,14 @@ def test_save_load_model_buffer_and_resume(tmp_path):
 
 
 def test_loading_a_buffer_ends_its_running_episodes_unless_told_they_go_on(tmp_path):
-    model = OffOnDQN("MlpPolicy", "CartPole-v1", seed=3, mc_truncation="terminal", **SMALL).learn(600)
+    model = paper_offon_dqn("MlpPolicy", "CartPole-v1", seed=3, mc_truncation="terminal", **SMALL).learn(600)
     model.save_replay_buffer(tmp_path / "buffer.pkl")
     length, last_slot = int(model.replay_buffer.episode_lengths[0]), model.replay_buffer.pos - 1
     episode = slice(last_slot - length + 1, last_slot + 1)
     assert length > 0 and np.isnan(model.replay_buffer.mc_returns[episode, 0]).all(), "600 steps end mid-episode"
 
     # A live model (its env mid-episode) loads another run's buffer: that run's episode must not chain into this one
-    live = OffOnDQN("MlpPolicy", "CartPole-v1", seed=4, mc_truncation="terminal", **SMALL).learn(50)
+    live = paper_offon_dqn("MlpPolicy", "CartPole-v1", seed=4, mc_truncation="terminal", **SMALL).learn(50)
     live.load_replay_buffer(tmp_path / "buffer.pkl")
     buffer = live.replay_buffer
     assert buffer.episode_lengths[0] == 0
@@ -456,17 +471,19 @@ def test_loading_a_buffer_ends_its_running_episodes_unless_told_they_go_on(tmp_p
 
 
 def test_loaded_buffer_gets_the_bootstrap_value_function_back(tmp_path):
-    model = OffOnDQN("MlpPolicy", "CartPole-v1", **SMALL).learn(200)
+    model = paper_offon_dqn("MlpPolicy", "CartPole-v1", **SMALL).learn(200)
     model.save_replay_buffer(tmp_path / "buffer.pkl")
     with open(tmp_path / "buffer.pkl", "rb") as file:
         assert pickle.load(file).truncation_value_fn is None, "the pickled buffer holds no reference to the model"
-    other = OffOnDQN("MlpPolicy", "CartPole-v1", **SMALL)
+    other = paper_offon_dqn("MlpPolicy", "CartPole-v1", **SMALL)
     other.load_replay_buffer(tmp_path / "buffer.pkl")
     assert other.replay_buffer.truncation_value_fn == other._target_state_values
 
 
 def test_continued_learning_keeps_episodes_open():
-    model = OffOnDQN("MlpPolicy", "CartPole-v1", seed=0, **SMALL)  # seeded: where episodes end must not depend on test order
+    model = paper_offon_dqn(
+        "MlpPolicy", "CartPole-v1", seed=0, **SMALL
+    )  # seeded: where episodes end must not depend on test order
     buffer = model.replay_buffer
     linked = 0
     for _ in range(5):
@@ -489,7 +506,7 @@ def test_continued_learning_keeps_episodes_open():
 
 
 def test_dict_observations():
-    model = OffOnDQN(
+    model = paper_offon_dqn(
         "MultiInputPolicy", SimpleMultiObsEnv(random_start=True), **{**SMALL, "learning_starts": 50, "batch_size": 8}
     )
     assert isinstance(model.replay_buffer, OffOnDictReplayBuffer)
@@ -500,7 +517,7 @@ def test_dict_observations():
 def test_image_observations():
     env = FakeImageEnv(screen_height=40, screen_width=40, n_channels=1, discrete=True)
     small_cnn = dict(**{**SMALL, "learning_starts": 50, "buffer_size": 300, "batch_size": 8, "policy_kwargs": None})
-    model = OffOnDQN("CnnPolicy", env, **small_cnn).learn(120)
+    model = paper_offon_dqn("CnnPolicy", env, **small_cnn).learn(120)
     assert not np.isnan(model.replay_buffer.mc_returns).all()
     assert model.replay_buffer.observations.dtype == np.uint8
 
@@ -508,7 +525,7 @@ def test_image_observations():
 def test_n_steps_uses_the_n_step_buffer_without_warning():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        model = OffOnDQN("MlpPolicy", "CartPole-v1", n_steps=3, **SMALL)
+        model = paper_offon_dqn("MlpPolicy", "CartPole-v1", n_steps=3, **SMALL)
         assert isinstance(model.replay_buffer, OffOnNStepReplayBuffer) and model.replay_buffer.n_steps == 3
         model.learn(300)
     assert model._n_updates > 0 and np.isfinite(model.replay_buffer.mc_returns).any()
@@ -517,11 +534,13 @@ def test_n_steps_uses_the_n_step_buffer_without_warning():
 def test_a_custom_n_step_buffer_gets_the_models_n_steps_and_gamma():
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # n_steps is not ignored: SB3's warning must not fire
-        model = OffOnDQN("MlpPolicy", "CartPole-v1", n_steps=5, gamma=0.9, replay_buffer_class=OffOnNStepReplayBuffer, **SMALL)
+        model = paper_offon_dqn(
+            "MlpPolicy", "CartPole-v1", n_steps=5, gamma=0.9, replay_buffer_class=OffOnNStepReplayBuffer, **SMALL
+        )
     assert model.replay_buffer.n_steps == 5 and model.replay_buffer.gamma == 0.9
     # SB3's way for a custom buffer (the model's n_steps left at 1) still works
     kwargs = {"replay_buffer_class": OffOnNStepReplayBuffer, "replay_buffer_kwargs": {"n_steps": 4}}
-    assert OffOnDQN("MlpPolicy", "CartPole-v1", **kwargs, **SMALL).replay_buffer.n_steps == 4
+    assert paper_offon_dqn("MlpPolicy", "CartPole-v1", **kwargs, **SMALL).replay_buffer.n_steps == 4
 
 
 @pytest.mark.parametrize(
@@ -535,11 +554,11 @@ def test_a_custom_n_step_buffer_gets_the_models_n_steps_and_gamma():
 def test_buffer_discounting_that_differs_from_the_models_names_it(model_kwargs, buffer_kwargs):
     key = next(iter(buffer_kwargs))
     with pytest.raises(ValueError, match=rf"replay_buffer_kwargs\['{key}'\].*model's `{key}`"):
-        OffOnDQN("MlpPolicy", "CartPole-v1", replay_buffer_kwargs=buffer_kwargs, **model_kwargs, **SMALL)
+        paper_offon_dqn("MlpPolicy", "CartPole-v1", replay_buffer_kwargs=buffer_kwargs, **model_kwargs, **SMALL)
 
 
 def test_a_model_loaded_with_another_gamma_and_n_steps_builds_its_buffer_with_them(tmp_path):
-    OffOnDQN("MlpPolicy", "CartPole-v1", n_steps=3, **SMALL).save(tmp_path / "model.zip")
+    paper_offon_dqn("MlpPolicy", "CartPole-v1", n_steps=3, **SMALL).save(tmp_path / "model.zip")
     loaded = OffOnDQN.load(tmp_path / "model.zip", env=gym.make("CartPole-v1"), gamma=0.9, n_steps=5)
     assert loaded.replay_buffer.gamma == 0.9 and loaded.replay_buffer.n_steps == 5
     assert loaded.replay_buffer_kwargs == {}, "the model's own values are not saved as the caller's buffer arguments"
@@ -547,7 +566,7 @@ def test_a_model_loaded_with_another_gamma_and_n_steps_builds_its_buffer_with_th
 
 @pytest.mark.parametrize("name, value", [("mc_mixing", "Max"), ("mc_initial_prob", 7.0)])
 def test_load_checks_the_offon_arguments_it_is_given(tmp_path, name, value):
-    OffOnDQN("MlpPolicy", "CartPole-v1", **SMALL).save(tmp_path / "model.zip")
+    paper_offon_dqn("MlpPolicy", "CartPole-v1", **SMALL).save(tmp_path / "model.zip")
     with pytest.raises(ValueError, match=name):
         OffOnDQN.load(tmp_path / "model.zip", custom_objects={name: value})
     with pytest.raises(ValueError, match=name):
@@ -559,7 +578,7 @@ def test_plain_buffer_warns_once_and_trains_with_qlearning():
     # target is Q-learning's and training is DQN's, bit for bit
     env_kwargs = dict(env_id="CartPole-v1", n_envs=2, seed=5)
     with pytest.warns(UserWarning, match="Q-learning targets only"):
-        model = OffOnDQN("MlpPolicy", make_vec_env(**env_kwargs), replay_buffer_class=ReplayBuffer, seed=5, **SMALL)
+        model = paper_offon_dqn("MlpPolicy", make_vec_env(**env_kwargs), replay_buffer_class=ReplayBuffer, seed=5, **SMALL)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         model.learn(600)
@@ -588,7 +607,7 @@ def test_plain_buffer_warns_once_and_trains_with_qlearning():
 )
 def test_bad_input_names_the_parameter(name, value):
     with pytest.raises(ValueError, match=name):
-        OffOnDQN("MlpPolicy", "CartPole-v1", **{name: value})
+        paper_offon_dqn("MlpPolicy", "CartPole-v1", **{name: value})
 
 
 @pytest.mark.parametrize(
@@ -605,19 +624,19 @@ def test_bad_input_names_the_parameter(name, value):
 @pytest.mark.parametrize("value", ["0.5", None, float("nan"), True, np.bool_(False), [0.5]])
 def test_bad_types_of_numbers_name_the_parameter(name, value):
     with pytest.raises(ValueError, match=f"`{name}` must be a real number"):
-        OffOnDQN("MlpPolicy", "CartPole-v1", **{name: value})
+        paper_offon_dqn("MlpPolicy", "CartPole-v1", **{name: value})
 
 
 @pytest.mark.parametrize("name", ["mc_mixing", "sarsa_target", "mc_truncation", "loss"])
 @pytest.mark.parametrize("value", [None, 1, True, ["sample"], np.array(["huber", "mse"])])
 def test_bad_types_of_options_name_the_parameter(name, value):
     with pytest.raises(ValueError, match=f"`{name}` must be one of"):
-        OffOnDQN("MlpPolicy", "CartPole-v1", **{name: value})
+        paper_offon_dqn("MlpPolicy", "CartPole-v1", **{name: value})
 
 
 def test_numpy_and_integer_probabilities_are_accepted():
     # What YAML files and NumPy code hand over: 1 (an int), np.float32 values
-    model = OffOnDQN(
+    model = paper_offon_dqn(
         "MlpPolicy", "CartPole-v1", mc_initial_prob=1, mc_final_prob=np.float32(0.25), qlearning_fraction=np.float64(0.5)
     )
     assert model.mc_schedule(1.0) == 1.0
@@ -636,7 +655,9 @@ class RecordingWriter(KVWriter):
 
 
 def test_training_statistics_are_logged(tmp_path):
-    model = OffOnDQN("MlpPolicy", "CartPole-v1", seed=0, tensorboard_log=str(tmp_path), **constant_probs(0.5, 0.5), **SMALL)
+    model = paper_offon_dqn(
+        "MlpPolicy", "CartPole-v1", seed=0, tensorboard_log=str(tmp_path), **constant_probs(0.5, 0.5), **SMALL
+    )
     writer = RecordingWriter()
     model.learn(1, tb_log_name="probe")  # sets up a logger; replaced below to capture what is written
     model.set_logger(Logger(folder=None, output_formats=[writer]))
@@ -656,7 +677,7 @@ def test_training_statistics_are_logged(tmp_path):
 
 
 def test_target_statistics_by_hand():
-    model = OffOnDQN("MlpPolicy", "CartPole-v1", **SMALL)
+    model = paper_offon_dqn("MlpPolicy", "CartPole-v1", **SMALL)
     writer = RecordingWriter()
     model.set_logger(Logger(folder=None, output_formats=[writer]))
     # Two gradient steps of two samples; G is known for one sample of each
@@ -684,13 +705,13 @@ def test_target_statistics_by_hand():
 
 
 def test_tensorboard_default_run_name(tmp_path):
-    OffOnDQN("MlpPolicy", "CartPole-v1", tensorboard_log=str(tmp_path), **SMALL).learn(200)
+    paper_offon_dqn("MlpPolicy", "CartPole-v1", tensorboard_log=str(tmp_path), **SMALL).learn(200)
     assert (tmp_path / "OffOnDQN_1").is_dir()
 
 
 def test_discrete_observations_with_truncated_episodes():
     # IdentityEnv ends every episode by truncation: the bootstrap sees Discrete observations in the buffer's layout
-    model = OffOnDQN("MlpPolicy", IdentityEnv(5, ep_length=20), gamma=0.9, **{**SMALL, "learning_starts": 30})
+    model = paper_offon_dqn("MlpPolicy", IdentityEnv(5, ep_length=20), gamma=0.9, **{**SMALL, "learning_starts": 30})
     model.learn(110)
     buffer, n = model.replay_buffer, model.replay_buffer.pos
     open_episode = slice(n - n % 20, n)

@@ -11,7 +11,7 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.envs import SimpleMultiObsEnv
 
 import sb3_offon.offon_dqn.offon_dqn as offon_dqn_module
-from sb3_offon import OffOnDQN
+from sb3_offon import PAPER_TARGETS, OffOnDQN
 
 SMALL = dict(
     learning_starts=100,
@@ -21,8 +21,9 @@ SMALL = dict(
     policy_kwargs=dict(net_arch=[16]),
     device="cpu",
 )
-# Both schedules in the middle all along, so that every kind of target is drawn
-MIXED = dict(mc_initial_prob=0.5, mc_final_prob=0.5, qlearning_initial_prob=0.5, qlearning_final_prob=0.5)
+# The paper's coin flips (OffOnDQN's defaults are lambda-returns), both schedules in the middle all along, so that every
+# kind of target is drawn
+MIXED = dict(mc_mixing="sample", mc_initial_prob=0.5, mc_final_prob=0.5, qlearning_initial_prob=0.5, qlearning_final_prob=0.5)
 
 
 class PerStepOffOnDQN(OffOnDQN):
@@ -71,7 +72,7 @@ def test_trains_to_the_parameters_of_the_per_step_loop(options, n_envs):
     # A buffer smaller than the run, so that sampling also covers a full, wrapped-around buffer
     def train(algo):
         env = make_vec_env("CartPole-v1", n_envs=n_envs, seed=3)
-        model = algo("MlpPolicy", env, seed=3, buffer_size=300, gradient_steps=12, **SMALL, **MIXED, **options)
+        model = algo("MlpPolicy", env, seed=3, buffer_size=300, gradient_steps=12, **{**SMALL, **MIXED, **options})
         return model.learn(900)
 
     ours, reference = train(OffOnDQN), train(PerStepOffOnDQN)
@@ -105,7 +106,9 @@ def test_dict_observations_train_to_the_parameters_of_the_per_step_loop():
 
 
 def test_sample_minibatches_is_sampling_step_by_step():
-    model = OffOnDQN("MlpPolicy", make_vec_env("CartPole-v1", n_envs=2, seed=0), seed=0, buffer_size=300, **SMALL)
+    model = OffOnDQN(
+        "MlpPolicy", make_vec_env("CartPole-v1", n_envs=2, seed=0), seed=0, buffer_size=300, **SMALL, **PAPER_TARGETS
+    )
     model.learn(500)
     buffer = model.replay_buffer
     np.random.seed(7)
@@ -167,14 +170,14 @@ def read_backs_of_one_train_call(algo, gradient_steps: int, counts: dict, **kwar
 
 @pytest.mark.parametrize(
     "options",
-    [MIXED, {**MIXED, "mc_mixing": "max"}, {**MIXED, "sarsa_target": "expected"}, {"n_steps": 3}, {"mc_mixing": "lambda"}],
-    ids=["sample", "max", "expected-sarsa", "defaults-3-step", "lambda"],
+    [MIXED, {**MIXED, "mc_mixing": "max"}, {**MIXED, "sarsa_target": "expected"}, {**PAPER_TARGETS, "n_steps": 3}, {}],
+    ids=["sample", "max", "expected-sarsa", "paper-3-step", "lambda-defaults"],
 )
 def test_read_backs_do_not_grow_with_gradient_steps(count_read_backs, options):
     few = read_backs_of_one_train_call(OffOnDQN, 4, count_read_backs, **options)
     many = read_backs_of_one_train_call(OffOnDQN, 32, count_read_backs, **options)
     # lambda: the call's loss, and the refresh of the lambda-returns' one read of V and the greedy actions (.cpu, .numpy)
-    if options.get("mc_mixing") == "lambda":
+    if "mc_mixing" not in options:
         assert few == many == 3
     else:
         assert few == many <= 2
