@@ -73,8 +73,8 @@ class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, DQN):
 
     Defaults: the lambda-return mode below (``mc_mixing="lambda"``) with lambda = 0.9 throughout training and Peng's
     Q(lambda) (delta2 = 0, no trace cuts): the configuration that a search on tuning seeds chose and that a
-    head-to-head on fresh seeds 20-29 found not below DQN's final return on any of four tasks and faster than n-step
-    DQN across them (issue 27, ``results/headtohead2/README.md``). The paper's configuration, described first below,
+    head-to-head on fresh seeds 20-29 found not below DQN's final return on any of four tasks and with a normalised
+    area under the learning curve above n-step DQN's across them (issue 27, ``results/headtohead2/README.md``). The paper's configuration, described first below,
     is one argument set away: ``OffOnDQN(policy, env, **sb3_offon.PAPER_TARGETS)`` (``--algo offon_dqn`` on the
     command line).
 
