@@ -22,16 +22,14 @@ from stable_baselines3.common.envs import IdentityEnv
 from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.vec_env import DummyVecEnv
 
-from sb3_offon import OffOnDQN
+from sb3_offon import LAMBDA_CHOICE_TARGETS, PAPER_TARGETS, OffOnDQN
 
-CHOICE = dict(mc_mixing="lambda", mc_initial_prob=0.9, mc_final_prob=0.9, qlearning_initial_prob=0.0, qlearning_final_prob=0.0)
-PAPER = dict(
-    mc_mixing="sample", mc_initial_prob=0.99, mc_final_prob=0.01, qlearning_initial_prob=0.99, qlearning_final_prob=0.01
-)
+# Written out, so that the rows keep their meaning whatever OffOnDQN's defaults are (the choice's since issue 27)
+CHOICE, PAPER = dict(LAMBDA_CHOICE_TARGETS), dict(PAPER_TARGETS)
 CASES = {
     "SB3's DQN": (DQN, {}),
-    "OffOnDQN, the paper's targets (today's defaults)": (OffOnDQN, PAPER),
-    "OffOnDQN, the choice (lambda 0.9, Peng), returns refreshed at target updates": (OffOnDQN, CHOICE),
+    "OffOnDQN, the paper's targets (PAPER_TARGETS; the defaults before issue 27)": (OffOnDQN, PAPER),
+    "OffOnDQN, the choice (lambda 0.9, Peng; the defaults since), returns refreshed at target updates": (OffOnDQN, CHOICE),
     "the choice, returns refreshed every 100 steps": (OffOnDQN, {**CHOICE, "lambda_refresh_interval": 100}),
     "the choice, returns refreshed every 4 steps (each training call)": (OffOnDQN, {**CHOICE, "lambda_refresh_interval": 4}),
     "lambda 0 (one-step targets), refreshed every 4 steps": (
