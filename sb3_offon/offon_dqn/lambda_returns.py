@@ -141,6 +141,11 @@ class LambdaReturnCache:
         return np.concatenate(drawn)
 
 
+def wants_whole_buffer(n_envs: int, first: int, n_stored: int, n_wanted: int) -> bool:
+    """Whether ``n_wanted`` transitions are at least all that is stored: then each env column is one block."""
+    return n_wanted >= n_envs * (n_stored - first)
+
+
 def choose_blocks(
     n_envs: int, first: int, n_stored: int, block_size: int, n_wanted: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -158,7 +163,7 @@ def choose_blocks(
     if n_valid <= 0:
         empty = np.zeros(0, dtype=np.int64)
         return empty, empty, empty
-    if n_wanted >= n_envs * n_valid:
+    if wants_whole_buffer(n_envs, first, n_stored, n_wanted):
         return np.arange(n_envs), np.full(n_envs, first), np.full(n_envs, n_valid)
     offset = np.random.randint(block_size)
     cuts = np.arange(first + offset, n_stored, block_size)
@@ -249,5 +254,5 @@ def compute_lambda_returns(
         lam=lam,
         qlearning_prob=qlearning_prob,
         trace_cut_fraction=trace_cut_fraction,
-        whole_buffer=n_wanted >= buffer.n_envs * (n_stored - first),
+        whole_buffer=wants_whole_buffer(buffer.n_envs, first, n_stored, n_wanted),
     )
