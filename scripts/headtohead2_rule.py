@@ -30,9 +30,15 @@ Part 2 can be read early too, in one case (added 2026-11-26, ninth session, whil
 missing are another algorithm's on one task. Those runs enter part 2 only through that task's min-max normalisation,
 which they can only widen; ``auc_gap_bounds`` bounds the choice's IQM minus n-step DQN's over every normalisation they
 could produce. If the bounds are both above zero (or both below), no run still to come can change the answer.
+
+The target of the intervals is read early in the same case (added 2026-11-26, tenth session, with the verdict already
+read and eight of QR-DQN's runs still to come): ``apart_margins`` computes the two 95% bounds as the complete grid's
+aggregate will (rliable's resamples depend on the grid's shape alone, so they can be drawn now) for each place the
+present range can take in a widened one, and ``auc_apart_bounds`` bounds them over all places.
 """
 
 import argparse
+import dataclasses
 import sys
 from pathlib import Path
 
@@ -50,6 +56,8 @@ STEPS_RATIO_AT_MOST = 0.7
 FINAL_ABOVE_AT_LEAST = 2
 # The grid of auc_gap_bounds: positions of the open task's present AUC range in a widened one, this far apart
 GAP_GRID_STEP = 0.002
+# The grid of auc_apart_bounds (a bootstrap at each point: coarser)
+APART_GRID_STEP = 0.01
 
 
 def pooled_iqm(columns: np.ndarray) -> np.ndarray:
@@ -102,6 +110,108 @@ def auc_gap_bounds(scores: dict, open_env: str, step: float = GAP_GRID_STEP) -> 
     return float(gap.min() - slack), float(gap.max() + slack)
 
 
+def stand_ins(runs: dict, scores: dict, open_env: str) -> tuple[dict, dict]:
+    """
+    ``runs`` and ``scores`` with every missing run on ``open_env`` stood in for by a copy of that algorithm's first run
+    there: inside the task's present range, so no normalisation moves, and the grid has the shape it will have complete.
+    """
+    runs = {env: dict(by_algo) for env, by_algo in runs.items()}
+    scores = {env: dict(by_algo) for env, by_algo in scores.items()}
+    for algo, present in runs[open_env].items():
+        missing = sorted(set(FRESH_SEEDS) - {run.seed for run in present})
+        runs[open_env][algo] = present + [dataclasses.replace(present[0], seed=seed) for seed in missing]
+        scores[open_env][algo] = {
+            key: np.concatenate([values, np.full(len(missing), values[0])]) for key, values in scores[open_env][algo].items()
+        }
+    return runs, scores
+
+
+def drawn_resamples(matrices: dict[str, np.ndarray], reps: int) -> dict[str, np.ndarray]:
+    """
+    The resamples that ``run_stats.interval_estimates`` draws for each algorithm of ``matrices`` (runs, tasks), as run
+    indices (reps, runs, tasks): recorded from a call on matrices of codes. rliable draws them from NumPy's global RNG,
+    seeded before the call, so they depend on the shapes and the order of the algorithms alone, not on the scores.
+    """
+    seen = []
+
+    def record(resample: np.ndarray) -> np.ndarray:
+        seen.append(np.array(resample))
+        return np.zeros(1)
+
+    size = max(len(matrix) for matrix in matrices.values())
+    codes = {
+        algo: np.broadcast_to(np.arange(len(m))[:, None] + k * size, m.shape).astype(float)
+        for k, (algo, m) in enumerate(matrices.items())
+    }
+    run_stats.interval_estimates(codes, record, reps)
+    drawn = {}
+    for k, algo in enumerate(matrices):
+        # The calls on this algorithm's codes: rliable's point estimate and arch's, on the codes as they are, then the
+        # resamples. Another count means another rliable or arch: better to stop than to read the wrong calls.
+        mine = [resample for resample in seen if resample.min() >= k * size and resample.max() < (k + 1) * size]
+        assert len(mine) == reps + 2 and np.array_equal(mine[0], codes[algo]), (len(mine), reps)
+        drawn[algo] = (np.stack(mine[-reps:]) - k * size).astype(int)
+    return drawn
+
+
+def apart_margins(runs: dict, scores: dict, open_env: str, reps: int, p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """
+    The choice's lower 95% bound of the IQM of normalised AUC minus n-step DQN's upper bound (the target's "intervals
+    apart": above zero), as ``run_stats.aggregates`` will compute them once ``open_env``'s runs are all in, if those
+    runs widen its AUC range so that the present one sits at [p, q] of it (one value per pair): the same resamples
+    (``drawn_resamples``, on the complete grid's shapes), the same IQM and the same percentiles.
+
+    :param runs: ``runs[env][algo]``, the fresh runs
+    :param scores: ``scores[env][algo]["auc"]``, in the order of ``runs``
+    :param open_env: the task whose runs are not all in
+    :param reps: bootstrap resamples, as the aggregate will use
+    :param p: places of the present minimum in the widened range
+    :param q: places of the present maximum (p <= q)
+    """
+    runs, scores = stand_ins(runs, scores, open_env)
+    envs, _, algos = run_stats.aggregate_cells(runs)
+    matrices = run_stats.normalised_matrices(runs, scores, envs, algos)["auc"]
+    resamples = drawn_resamples(matrices, reps)
+    column = envs.index(open_env)
+    # arch's percentiles of rliable's 95% interval
+    tail = 100 * (1 - 0.95) / 2
+    bounds = {}
+    for algo, percentile in ((CHOICE, tail), (NSTEP, 100 - tail)):
+        matrix = matrices[algo]
+        resampled = matrix[resamples[algo], np.arange(matrix.shape[1])]  # (reps, runs, tasks)
+        ends = []
+        for start in range(0, len(p), 64):
+            places, widths = p[start : start + 64, None, None], (q - p)[start : start + 64, None, None]
+            moved = np.repeat(resampled[None], len(places), axis=0)
+            moved[..., column] = places + widths * resampled[None, :, :, column]
+            ends.append(np.percentile(pooled_iqm(moved.reshape(*moved.shape[:2], -1)), percentile, axis=-1))
+        bounds[algo] = np.concatenate(ends)
+    return bounds[CHOICE] - bounds[NSTEP]
+
+
+def auc_apart_bounds(runs: dict, scores: dict, open_env: str, reps: int, step: float = APART_GRID_STEP) -> tuple[float, float]:
+    """
+    Bounds on ``apart_margins`` over every normalisation of ``open_env`` that runs still to come could produce: its
+    values on a grid of (p, q), as ``auc_gap_bounds``, widened by how far they can move between grid points. There each
+    resample's IQM moves by at most (runs on the task / the size of the middle half) * step / 2, and so does each
+    percentile of them (a percentile moves no further than the values it is read from): that much for each of the two
+    bounds.
+
+    :param runs: ``runs[env][algo]``, the fresh runs
+    :param scores: ``scores[env][algo]["auc"]``, in the order of ``runs``
+    :param open_env: the task whose runs are not all in
+    :param reps: bootstrap resamples, as the aggregate will use
+    :param step: the grid step (its inverse a whole number)
+    :return: (lowest, highest) possible margin
+    """
+    places = np.linspace(0.0, 1.0, round(1 / step) + 1)
+    p, q = (grid.ravel() for grid in np.meshgrid(places, places, indexing="ij"))
+    margins = apart_margins(runs, scores, open_env, reps, p[p <= q], q[p <= q])
+    n_runs, n_pooled = len(FRESH_SEEDS), len(FRESH_SEEDS) * len(scores)
+    slack = 2 * n_runs / (n_pooled - 2 * int(0.25 * n_pooled)) * step / 2
+    return float(margins.min() - slack), float(margins.max() + slack)
+
+
 def open_task(scores: dict) -> str | None:
     """
     The one task where runs are missing, if DQN's, n-step DQN's and the choice's are all in everywhere and the missing
@@ -120,13 +230,14 @@ def open_task(scores: dict) -> str | None:
     return open_envs[0] if len(open_envs) == 1 else None
 
 
-def judge(runs: dict, scores: dict, reps: int) -> tuple[str, list[str]]:
+def judge(runs: dict, scores: dict, reps: int, apart_step: float = APART_GRID_STEP) -> tuple[str, list[str]]:
     """
     The verdict on the defaults, and the lines that show it and the issue's targets.
 
     :param runs: ``runs[env][algo]``, the fresh runs (``run_stats.Run``), for the aggregate's seeds
     :param scores: ``scores[env][algo]["final" | "auc" | "steps"]``, one value per run in the order of ``runs``
     :param reps: bootstrap resamples of every interval
+    :param apart_step: the grid step of ``auc_apart_bounds`` when the target is read early
     :return: ("holds" | "does not hold" | "incomplete", lines)
     """
     lines, complete, failed_for_good = [], True, False
@@ -166,12 +277,15 @@ def judge(runs: dict, scores: dict, reps: int) -> tuple[str, list[str]]:
     )
     covered = aggregate is not None and aggregate["envs"] == list(BENCHMARK_ENVS) and set(aggregate["algos"]) == set(ALGOS)
     complete &= covered
-    # Part 2 read before the grid is complete (see the module's docstring): (task, lowest gap, highest gap), or None
-    early = None
+    # Part 2 and the target of the intervals read before the grid is complete (see the module's docstring):
+    # (task, lowest, highest) of the gap and of the margin between the intervals, or None
+    early = early_apart = None
     open_env = None if complete or failed_for_good else open_task(scores)
     if open_env is not None:
         early = (open_env, *auc_gap_bounds(scores, open_env))
+        early_apart = (open_env, *auc_apart_bounds(runs, scores, open_env, reps, apart_step))
     early_decided = early is not None and (early[1] > 0 or early[2] < 0)
+    apart_early = None if early_apart is None else "met" if early_apart[1] > 0 else "missed" if early_apart[2] < 0 else None
     faster = apart = False
     if covered:
         choice_auc, nstep_auc = aggregate["iqm_auc"][CHOICE], aggregate["iqm_auc"][NSTEP]
@@ -189,7 +303,7 @@ def judge(runs: dict, scores: dict, reps: int) -> tuple[str, list[str]]:
         "Rule 2, IQM of normalised AUC above n-step DQN's: "
         + (("yes" if faster else "no") if covered else "waits" if not early_decided else "decided early (below)"),
         "Target, that IQM above n-step DQN's with the intervals apart: "
-        + (("met" if apart else "missed") if covered else "waits"),
+        + (("met" if apart else "missed") if covered else f"{apart_early}, decided early (below)" if apart_early else "waits"),
         f"Target, final return not below DQN's on every task and above on at least {FINAL_ABOVE_AT_LEAST}: "
         + ("met" if final_not_below == tasks and final_above >= FINAL_ABOVE_AT_LEAST else "missed")
         + f" (above on {final_above})",
@@ -208,6 +322,11 @@ def judge(runs: dict, scores: dict, reps: int) -> tuple[str, list[str]]:
             f"Rule 2 before {env}'s last runs: {CHOICE}'s IQM of normalised AUC minus {NSTEP}'s lies in "
             f"[{low:+.4f}, {high:+.4f}] over every normalisation of {env} those runs could produce"
         )
+        if early_apart is not None:
+            lines.append(
+                f"Target of the intervals before {env}'s last runs: the lower 95% bound of {CHOICE}'s IQM minus the "
+                f"upper bound of {NSTEP}'s lies in [{early_apart[1]:+.4f}, {early_apart[2]:+.4f}] (apart when above zero)"
+            )
         if early_decided:
             lines.append(f"Rules 1 and 2 are decided: the runs still missing on {env} cannot change the verdict")
             return ("holds" if final_not_below == tasks and low > 0 else "does not hold"), lines

@@ -248,8 +248,8 @@ def incomplete_cells(by_algo: dict[str, list[Run]], algos: list[str]) -> str:
     return ", ".join(missing)
 
 
-def aggregates(runs: dict[str, dict[str, list[Run]]], scores: dict, reps: int) -> dict | None:
-    """IQM of min-max normalised final returns and AUC, and P(improvement over DQN), over the envs all variants ran."""
+def aggregate_cells(runs: dict[str, dict[str, list[Run]]]) -> tuple[list[str], dict[str, str], list[str]]:
+    """The envs an aggregate reads, those it leaves out (and why), and the algorithms, in the order of every table."""
     algos = sorted({algo for by_algo in runs.values() for algo in by_algo}, key=algo_order)
     envs = list(runs)
     if any(env not in SECTION_44 for env in envs):
@@ -258,15 +258,17 @@ def aggregates(runs: dict[str, dict[str, list[Run]]], scores: dict, reps: int) -
     # taken in, it would shrink that variant's aggregate to the seeds it has there, or leave the variant out
     left_out = {env: incomplete_cells(runs[env], algos) for env in envs}
     left_out = {env: cells for env, cells in left_out.items() if cells}
-    envs = [env for env in envs if env not in left_out]
-    if not envs:
-        return None
-    # Per algo: (runs, tasks) on the seeds it has on every env
+    return [env for env in envs if env not in left_out], left_out, algos
+
+
+def normalised_matrices(runs: dict, scores: dict, envs: list[str], algos: list[str]) -> dict[str, dict[str, np.ndarray]]:
+    """``matrices[measure][algo]``: (runs, tasks) of ``envs``' scores min-max normalised over every algorithm's runs there."""
     matrices: dict[str, dict[str, np.ndarray]] = {"final": {}, "auc": {}}
     for measure in matrices:
         lows = {env: min(scores[env][algo][measure].min() for algo in algos) for env in envs}
         highs = {env: max(scores[env][algo][measure].max() for algo in algos) for env in envs}
         for algo in algos:
+            # Per algo: the seeds it has on every env
             seeds = sorted(set.intersection(*({run.seed for run in runs[env][algo]} for env in envs)))
             columns = []
             for env in envs:
@@ -274,6 +276,15 @@ def aggregates(runs: dict[str, dict[str, list[Run]]], scores: dict, reps: int) -
                 span = highs[env] - lows[env]
                 columns.append([(by_seed[seed] - lows[env]) / span if span > 0 else 0.5 for seed in seeds])
             matrices[measure][algo] = np.array(columns).T
+    return matrices
+
+
+def aggregates(runs: dict[str, dict[str, list[Run]]], scores: dict, reps: int) -> dict | None:
+    """IQM of min-max normalised final returns and AUC, and P(improvement over DQN), over the envs all variants ran."""
+    envs, left_out, algos = aggregate_cells(runs)
+    if not envs:
+        return None
+    matrices = normalised_matrices(runs, scores, envs, algos)
     result: dict = {
         "envs": envs,
         "left_out": left_out,

@@ -855,19 +855,23 @@ def test_headtohead2_rule_from_hand_made_scores():
     assert verdict == "does not hold" and lines[-4].endswith("no") and lines[-3].endswith("missed"), lines
     # QR-DQN's cell on one task with nine seeds: the aggregate waits, but part 2 can be bounded over whatever its last
     # run shows (it only widens Acrobot-v1's range), and the choice's AUC is far above n-step DQN's everywhere
-    verdict, lines = module.judge(*grid(even, level, n_seeds=9), reps=300)
+    # (and so can the target of the intervals: far apart whatever that run shows)
+    verdict, lines = module.judge(*grid(even, level, n_seeds=9), reps=300, apart_step=0.05)
     assert verdict == "holds" and "still to run: qrdqn" in lines[3] and "waits until" in lines[4], lines
-    assert lines[-6].endswith("n-step DQN's: decided early (below)") and lines[-5].endswith("apart: waits"), lines
-    assert lines[-2].startswith("Rule 2 before Acrobot-v1's last runs") and "cannot change" in lines[-1], lines
+    assert lines[-7].endswith("n-step DQN's: decided early (below)"), lines
+    assert lines[-6].endswith("apart: met, decided early (below)"), lines
+    assert lines[-3].startswith("Rule 2 before Acrobot-v1's last runs") and "cannot change" in lines[-1], lines
+    assert lines[-2].startswith("Target of the intervals before Acrobot-v1's last runs"), lines
     # ... and when the choice is level with n-step DQN except a little above on that task, a last run that widens its
     # range far enough would make them level: no decision
     runs, scores = grid(even, dict(level, **{module.CHOICE: 5.0}), n_seeds=9)
     scores["Acrobot-v1"][module.CHOICE]["auc"] = scores["Acrobot-v1"][module.CHOICE]["auc"] + 0.5
-    verdict, lines = module.judge(runs, scores, reps=300)
-    assert verdict == "incomplete" and lines[-1].startswith("Rule 2 before Acrobot-v1's last runs"), lines
+    verdict, lines = module.judge(runs, scores, reps=300, apart_step=0.05)
+    assert verdict == "incomplete" and lines[-2].startswith("Rule 2 before Acrobot-v1's last runs"), lines
+    assert lines[-5].endswith("apart: waits"), "a near tie: undecided, as part 2"
     # Part 1 failed on a task whose DQN and choice cells are complete: decided before QR-DQN's last run
     below = dict(even, **{"Acrobot-v1": -20.0})
-    verdict, lines = module.judge(*grid(below, level, n_seeds=9), reps=300)
+    verdict, lines = module.judge(*grid(below, level, n_seeds=9), reps=300, apart_step=0.05)
     assert verdict == "does not hold" and "BELOW zero" in lines[3] and "cannot change" in lines[-1], lines
     # ... but not while the choice's own cell on that task lacks a seed: its tenth run could move the interval
     runs, scores = grid(below, level)
@@ -923,6 +927,55 @@ def test_headtohead2_auc_gap_bounds_hold_whatever_the_missing_runs_show():
     # Missing runs of n-step DQN, or on two tasks: nothing to bound
     scores["CartPole-v1"]["qrdqn"] = {key: values[:9] for key, values in scores["CartPole-v1"]["qrdqn"].items()}
     assert module.open_task(scores) is None
+
+
+def test_headtohead2_apart_margins_are_the_aggregates_own_and_their_bounds_hold():
+    """
+    The target of the intervals read early: ``apart_margins`` at (p, q) equals what ``run_stats.aggregates`` computes
+    once runs that widen the open task's range that way are in (same resamples, same percentiles), and the bounds of
+    ``auc_apart_bounds`` contain it whatever the missing runs show.
+    """
+    module = load_script("headtohead2_rule")
+    rng = np.random.default_rng(1)
+    envs = ["CartPole-v1", "MountainCar-v0", "LunarLander-v3", "Acrobot-v1"]
+    runs, scores = {}, {}
+    for env in envs:
+        for algo in module.ALGOS:
+            n_runs = 4 if (algo == "qrdqn" and env == "LunarLander-v3") else 10
+            runs.setdefault(env, {})[algo] = [
+                module.run_stats.Run(algo, env, seed, 100, np.array([100]), np.array([0.0]), None)
+                for seed in range(20, 20 + n_runs)
+            ]
+            auc = rng.normal(0.5 if algo == module.CHOICE else 0.0, 1.0, n_runs)
+            scores.setdefault(env, {})[algo] = {"final": auc, "auc": auc, "steps": np.ones(n_runs)}
+    present = np.concatenate([values["auc"] for values in scores["LunarLander-v3"].values()])
+    low, high = present.min(), present.max()
+    reps = 200
+    bounds = module.auc_apart_bounds(runs, scores, "LunarLander-v3", reps, step=0.05)
+    margins = []
+    for p, q in [(0.0, 1.0), (0.2, 0.7), (0.0, 0.5), (0.5, 1.0), (0.45, 0.55)]:
+        # Six runs to come: two of them set the widened range [low', high'], in which [low, high] sits at [p, q]
+        span = (high - low) / (q - p)
+        to_come = np.array([low - p * span, low - p * span + span, *rng.uniform(low, high, 4)])
+        completed = {env: dict(by_algo) for env, by_algo in scores.items()}
+        completed_runs = {env: dict(by_algo) for env, by_algo in runs.items()}
+        completed["LunarLander-v3"]["qrdqn"] = {
+            key: np.concatenate([values, to_come]) for key, values in scores["LunarLander-v3"]["qrdqn"].items()
+        }
+        completed_runs["LunarLander-v3"]["qrdqn"] = [
+            module.run_stats.Run("qrdqn", "LunarLander-v3", seed, 100, np.array([100]), np.array([0.0]), None)
+            for seed in range(20, 30)
+        ]
+        aggregate = module.run_stats.aggregates(completed_runs, completed, reps=reps)
+        margin = aggregate["iqm_auc"][module.CHOICE][1] - aggregate["iqm_auc"][module.NSTEP][2]
+        computed = module.apart_margins(runs, scores, "LunarLander-v3", reps, np.array([p]), np.array([q]))
+        assert np.isclose(computed[0], margin, rtol=0, atol=1e-12), (p, q, computed, margin)
+        assert bounds[0] <= margin <= bounds[1], (p, q, bounds, margin)
+        margins.append(margin)
+    assert len(set(np.round(margins, 6))) == len(margins), "the places matter: a test that could not tell them apart"
+    # NumPy's global RNG is seeded inside; what ran before does not matter
+    np.random.seed(7)
+    assert module.auc_apart_bounds(runs, scores, "LunarLander-v3", reps, step=0.05) == bounds
 
 
 @pytest.mark.parametrize("rule, fresh", [("headtohead_rule", [10, 19]), ("headtohead2_rule", [20, 29])])
