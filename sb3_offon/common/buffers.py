@@ -109,6 +109,8 @@ class OffOnBufferMixin:
     next_observations: Any
     rewards: np.ndarray
     device: th.device
+    # The steps each transition's TD target spans: 1 here, SB3's NStepReplayBuffer sets its own ``n_steps`` per instance
+    n_steps: int = 1
 
     def _init_offon(self, gamma: float) -> None:
         self.gamma = gamma
@@ -365,7 +367,7 @@ class OffOnBufferMixin:
             ``running_newest`` (e is the newest transition of an episode still running), ``next_observations``
             (s_{t+k}, normalised as ``sample()`` normalises them)
         """
-        n_steps = getattr(self, "n_steps", 1)
+        n_steps = self.n_steps
         offsets = np.arange(n_steps)
         window = (slots[:, None] + offsets) % self.buffer_size
         # The window stops at its first step whose episode did not go on (recorded next action -1): an episode's end,
@@ -408,7 +410,7 @@ class OffOnBufferMixin:
 
     def _sarsa_next_actions(self, batch_inds: np.ndarray, env_indices: np.ndarray) -> np.ndarray:
         """The action taken at the state that each sample's TD target bootstraps from (-1 where unknown)."""
-        n_steps = getattr(self, "n_steps", 1)
+        n_steps = self.n_steps
         if n_steps == 1:
             return self.next_actions[batch_inds, env_indices]
         # n-step: the action at s_{t+n}. It is known only if the episode went on for all n steps, i.e. every step of

@@ -218,7 +218,7 @@ def compute_lambda_returns(
     next_values, greedy_actions = target_values(inputs["next_observations"])
     next_actions = inputs["next_actions"].reshape(-1)
     # Where the trace goes on: the next transition (one-step buffer) or the one after the n-step window
-    stride = getattr(buffer, "n_steps", 1)
+    stride = buffer.n_steps
 
     # In the blocks' padded layout: a transition's trace goes on to the one `stride` steps later if its episode went on
     # past its window and that transition is in the block
