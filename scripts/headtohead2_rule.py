@@ -65,7 +65,41 @@ def pooled_iqm(columns: np.ndarray) -> np.ndarray:
     return stats.trim_mean(columns, 0.25, axis=-1)
 
 
-def auc_gap_bounds(scores: dict, open_env: str, step: float = GAP_GRID_STEP) -> tuple[float, float]:
+def place_grid(step: float) -> tuple[np.ndarray, np.ndarray]:
+    """Every pair of places 0 <= p <= q <= 1 on a grid ``step`` apart (its inverse a whole number)."""
+    places = np.linspace(0.0, 1.0, round(1 / step) + 1)
+    p, q = (grid.ravel() for grid in np.meshgrid(places, places, indexing="ij"))
+    return p[p <= q], q[p <= q]
+
+
+def moved(values: np.ndarray, column: int, p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """``values`` (..., tasks) once for each (p, q), its ``column`` (normalised scores y) moved to p + (q - p) * y."""
+    shape = (len(p),) + (1,) * (values.ndim - 1)
+    result = np.repeat(values[None], len(p), axis=0)
+    result[..., column] = p.reshape(shape) + (q - p).reshape(shape) * values[None, ..., column]
+    return result
+
+
+def normalised_auc(runs: dict, scores: dict, open_env: str) -> tuple[dict[str, np.ndarray], int]:
+    """
+    The (runs, tasks) matrices of normalised AUC that ``run_stats.aggregates`` will read once ``open_env``'s runs are
+    all in, as they are before those runs widen its range (``stand_ins``), and the column of ``open_env`` in them.
+    """
+    runs, scores = stand_ins(runs, scores, open_env)
+    envs, _, algos = run_stats.aggregate_cells(runs)
+    return run_stats.normalised_matrices(runs, scores, envs, algos)["auc"], envs.index(open_env)
+
+
+def slack(matrix: np.ndarray, step: float) -> float:
+    """
+    How far an IQM of the scores of ``matrix`` (runs, tasks) can move when one task's scores each move by at most
+    step / 2: sorting does not lengthen the sum of the moves, so by at most (runs / the size of the middle half) * step / 2.
+    """
+    n_pooled = matrix.size
+    return len(matrix) / (n_pooled - 2 * int(0.25 * n_pooled)) * step / 2
+
+
+def auc_gap_bounds(runs: dict, scores: dict, open_env: str, step: float = GAP_GRID_STEP) -> tuple[float, float]:
     """
     Bounds on the choice's IQM of normalised AUC minus n-step DQN's over every normalisation of ``open_env`` that runs
     still to come there could produce (the other tasks' being final, and both algorithms' runs all in).
@@ -74,40 +108,21 @@ def auc_gap_bounds(scores: dict, open_env: str, step: float = GAP_GRID_STEP) -> 
     [low', high']. In it the present normalised scores y (in [0, 1]) become p + (q - p) * y, where p and q, the places
     of low and high, can be any 0 <= p <= q <= 1 (p = q is the limit of a range that new runs widen without bound).
     The gap is computed on a grid of (p, q) ``step`` apart. Every (p, q) lies within step / 2 of a grid point in each
-    coordinate, which moves each normalised score of the task by at most step / 2; sorting does not lengthen the sum of
-    the moves, so each algorithm's IQM (the mean of the middle half of its pooled scores) moves by at most (its runs on
-    the task / the size of that middle half) * step / 2. The grid's extremes widened by that much for both algorithms
-    therefore bound the gap over the whole triangle.
+    coordinate, which moves each normalised score of the task by at most step / 2, and each algorithm's IQM by at most
+    ``slack``. The grid's extremes widened by that much for both algorithms therefore bound the gap over the whole
+    triangle.
 
-    :param scores: ``scores[env][algo]["auc"]``; every algorithm present on an env counts in its range
+    :param runs: ``runs[env][algo]``, the fresh runs
+    :param scores: ``scores[env][algo]["auc"]``, in the order of ``runs``; every algorithm on an env counts in its range
     :param open_env: the task whose runs are not all in
     :param step: the grid step (its inverse a whole number)
     :return: (lowest, highest) possible gap
     """
-    columns: dict[str, list[np.ndarray]] = {CHOICE: [], NSTEP: []}
-    open_scores = {}
-    for env, by_algo in scores.items():
-        low = min(values["auc"].min() for values in by_algo.values())
-        span = max(values["auc"].max() for values in by_algo.values()) - low
-        for algo in columns:
-            normalised = (by_algo[algo]["auc"] - low) / span if span > 0 else np.full(len(by_algo[algo]["auc"]), 0.5)
-            if env == open_env:
-                open_scores[algo] = normalised
-            else:
-                columns[algo].append(normalised)
-    places = np.linspace(0.0, 1.0, round(1 / step) + 1)
-    p, q = (grid.ravel() for grid in np.meshgrid(places, places, indexing="ij"))
-    p, q = p[p <= q], q[p <= q]
-    iqm, slack = {}, 0.0
-    for algo, fixed in columns.items():
-        moved = p[:, None] + (q - p)[:, None] * open_scores[algo][None, :]
-        pooled = np.concatenate([np.broadcast_to(np.concatenate(fixed), (len(p), sum(map(len, fixed)))), moved], axis=1)
-        iqm[algo] = pooled_iqm(pooled)
-        n_pooled = pooled.shape[1]
-        n_middle = n_pooled - 2 * int(0.25 * n_pooled)
-        slack += len(open_scores[algo]) / n_middle * step / 2
-    gap = iqm[CHOICE] - iqm[NSTEP]
-    return float(gap.min() - slack), float(gap.max() + slack)
+    matrices, column = normalised_auc(runs, scores, open_env)
+    p, q = place_grid(step)
+    iqm = {algo: pooled_iqm(moved(matrices[algo], column, p, q).reshape(len(p), -1)) for algo in (CHOICE, NSTEP)}
+    gap, widening = iqm[CHOICE] - iqm[NSTEP], slack(matrices[CHOICE], step) + slack(matrices[NSTEP], step)
+    return float(gap.min() - widening), float(gap.max() + widening)
 
 
 def stand_ins(runs: dict, scores: dict, open_env: str) -> tuple[dict, dict]:
@@ -168,11 +183,8 @@ def apart_margins(runs: dict, scores: dict, open_env: str, reps: int, p: np.ndar
     :param p: places of the present minimum in the widened range
     :param q: places of the present maximum (p <= q)
     """
-    runs, scores = stand_ins(runs, scores, open_env)
-    envs, _, algos = run_stats.aggregate_cells(runs)
-    matrices = run_stats.normalised_matrices(runs, scores, envs, algos)["auc"]
+    matrices, column = normalised_auc(runs, scores, open_env)
     resamples = drawn_resamples(matrices, reps)
-    column = envs.index(open_env)
     # arch's percentiles of rliable's 95% interval
     tail = 100 * (1 - 0.95) / 2
     bounds = {}
@@ -181,10 +193,8 @@ def apart_margins(runs: dict, scores: dict, open_env: str, reps: int, p: np.ndar
         resampled = matrix[resamples[algo], np.arange(matrix.shape[1])]  # (reps, runs, tasks)
         ends = []
         for start in range(0, len(p), 64):
-            places, widths = p[start : start + 64, None, None], (q - p)[start : start + 64, None, None]
-            moved = np.repeat(resampled[None], len(places), axis=0)
-            moved[..., column] = places + widths * resampled[None, :, :, column]
-            ends.append(np.percentile(pooled_iqm(moved.reshape(*moved.shape[:2], -1)), percentile, axis=-1))
+            chunk = moved(resampled, column, p[start : start + 64], q[start : start + 64])
+            ends.append(np.percentile(pooled_iqm(chunk.reshape(*chunk.shape[:2], -1)), percentile, axis=-1))
         bounds[algo] = np.concatenate(ends)
     return bounds[CHOICE] - bounds[NSTEP]
 
@@ -192,10 +202,9 @@ def apart_margins(runs: dict, scores: dict, open_env: str, reps: int, p: np.ndar
 def auc_apart_bounds(runs: dict, scores: dict, open_env: str, reps: int, step: float = APART_GRID_STEP) -> tuple[float, float]:
     """
     Bounds on ``apart_margins`` over every normalisation of ``open_env`` that runs still to come could produce: its
-    values on a grid of (p, q), as ``auc_gap_bounds``, widened by how far they can move between grid points. There each
-    resample's IQM moves by at most (runs on the task / the size of the middle half) * step / 2, and so does each
-    percentile of them (a percentile moves no further than the values it is read from): that much for each of the two
-    bounds.
+    values on a grid of (p, q), as ``auc_gap_bounds``, widened by how far they can move between grid points: each
+    resample's IQM by at most ``slack``, and so each percentile of them (a percentile moves no further than the values
+    it is read from), for each of the two bounds.
 
     :param runs: ``runs[env][algo]``, the fresh runs
     :param scores: ``scores[env][algo]["auc"]``, in the order of ``runs``
@@ -204,12 +213,11 @@ def auc_apart_bounds(runs: dict, scores: dict, open_env: str, reps: int, step: f
     :param step: the grid step (its inverse a whole number)
     :return: (lowest, highest) possible margin
     """
-    places = np.linspace(0.0, 1.0, round(1 / step) + 1)
-    p, q = (grid.ravel() for grid in np.meshgrid(places, places, indexing="ij"))
-    margins = apart_margins(runs, scores, open_env, reps, p[p <= q], q[p <= q])
-    n_runs, n_pooled = len(FRESH_SEEDS), len(FRESH_SEEDS) * len(scores)
-    slack = 2 * n_runs / (n_pooled - 2 * int(0.25 * n_pooled)) * step / 2
-    return float(margins.min() - slack), float(margins.max() + slack)
+    p, q = place_grid(step)
+    margins = apart_margins(runs, scores, open_env, reps, p, q)
+    matrices, _ = normalised_auc(runs, scores, open_env)
+    widening = slack(matrices[CHOICE], step) + slack(matrices[NSTEP], step)
+    return float(margins.min() - widening), float(margins.max() + widening)
 
 
 def open_task(scores: dict) -> str | None:
@@ -282,7 +290,7 @@ def judge(runs: dict, scores: dict, reps: int, apart_step: float = APART_GRID_ST
     early = early_apart = None
     open_env = None if complete or failed_for_good else open_task(scores)
     if open_env is not None:
-        early = (open_env, *auc_gap_bounds(scores, open_env))
+        early = (open_env, *auc_gap_bounds(runs, scores, open_env))
         early_apart = (open_env, *auc_apart_bounds(runs, scores, open_env, reps, apart_step))
     early_decided = early is not None and (early[1] > 0 or early[2] < 0)
     apart_early = None if early_apart is None else "met" if early_apart[1] > 0 else "missed" if early_apart[2] < 0 else None

@@ -906,7 +906,7 @@ def test_headtohead2_auc_gap_bounds_hold_whatever_the_missing_runs_show():
             auc = rng.normal(1.0 if algo == module.CHOICE else 0.0, 1.0, n_runs)
             scores.setdefault(env, {})[algo] = {"final": auc, "auc": auc, "steps": np.ones(n_runs)}
     assert module.open_task(scores) == "LunarLander-v3"
-    low, high = module.auc_gap_bounds(scores, "LunarLander-v3", step=0.01)
+    low, high = module.auc_gap_bounds(runs, scores, "LunarLander-v3", step=0.01)
     assert low < high
     qrdqn = scores["LunarLander-v3"]["qrdqn"]["auc"]
     # The seven runs to come: inside the present range, far outside it, or anywhere between
