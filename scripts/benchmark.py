@@ -104,6 +104,18 @@ def parse_seeds(tokens: list[str]) -> list[int]:
     return sorted(set(seeds))
 
 
+def seeds_text(seeds: list[int]) -> str:
+    """The seeds as ranges, ``0-9`` or ``20, 23-29``: printed before a grid runs, where ``--seeds 20`` (a count, seeds
+    0-19) would otherwise pass for seed 20."""
+    ranges: list[list[int]] = []
+    for seed in sorted(seeds):
+        if ranges and seed == ranges[-1][1] + 1:
+            ranges[-1][1] = seed
+        else:
+            ranges.append([seed, seed])
+    return ", ".join(str(first) if first == last else f"{first}-{last}" for first, last in ranges)
+
+
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawTextHelpFormatter)
     parser.add_argument("--set", default="paper", choices=available_sets(), help="hyperparameter set (default: paper)")
@@ -464,7 +476,8 @@ def main(argv: list[str] | None = None) -> int:
     todo = [spec for spec in specs if statuses[id(spec)] != "finished"]
     todo = run_order(todo)
     print(
-        f"{len(specs)} runs ({len(args.algos)} algos x {len(args.envs)} envs x {len(args.seeds)} seeds, '{args.set}' set) "
+        f"{len(specs)} runs ({len(args.algos)} algos x {len(args.envs)} envs x {len(args.seeds)} seeds "
+        f"({seeds_text(args.seeds)}), '{args.set}' set) "
         f"in {args.root / (args.name or args.set)}: {len(specs) - len(todo)} finished, {len(todo)} to run"
         + (f" on Ray ({args.ray_address or f'local, {args.workers} CPUs'})" if args.ray else f" on {args.workers} workers")
     )

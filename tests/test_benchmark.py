@@ -71,6 +71,16 @@ def test_dry_run_of_the_tuned_set(tmp_path: Path):
     assert seeds == sorted(seeds)
 
 
+def test_the_grid_says_which_seeds_it_runs(tmp_path: Path):
+    """A lone number is a count (``--seeds 20``: seeds 0-19), so the first line names the seeds, not only their number."""
+    module = load_script("benchmark")
+    assert module.seeds_text(module.parse_seeds(["20"])) == "0-19"
+    assert module.seeds_text(module.parse_seeds(["20-20"])) == "20"
+    assert module.seeds_text(module.parse_seeds(["29", "20", "23-28"])) == "20, 23-29"
+    output = check(benchmark(tmp_path, "--set", "tuned", "--envs", "CartPole-v1", "--seeds", "20", "23-24", "--dry-run"))
+    assert output.splitlines()[0].startswith("6 runs (2 algos x 1 envs x 3 seeds (20, 23-24), 'tuned' set)"), output
+
+
 def test_a_grid_named_apart_from_its_set(tmp_path: Path):
     output = check(
         benchmark(tmp_path, "--set", "tuned", "--name", "headtohead", "--envs", "CartPole-v1", "--seeds", "10-11", "--dry-run")
