@@ -169,21 +169,19 @@ def drawn_resamples(matrices: dict[str, np.ndarray], reps: int) -> dict[str, np.
     return drawn
 
 
-def apart_margins(runs: dict, scores: dict, open_env: str, reps: int, p: np.ndarray, q: np.ndarray) -> np.ndarray:
+def apart_margins(matrices: dict[str, np.ndarray], column: int, reps: int, p: np.ndarray, q: np.ndarray) -> np.ndarray:
     """
     The choice's lower 95% bound of the IQM of normalised AUC minus n-step DQN's upper bound (the target's "intervals
-    apart": above zero), as ``run_stats.aggregates`` will compute them once ``open_env``'s runs are all in, if those
+    apart": above zero), as ``run_stats.aggregates`` will compute them once the open task's runs are all in, if those
     runs widen its AUC range so that the present one sits at [p, q] of it (one value per pair): the same resamples
     (``drawn_resamples``, on the complete grid's shapes), the same IQM and the same percentiles.
 
-    :param runs: ``runs[env][algo]``, the fresh runs
-    :param scores: ``scores[env][algo]["auc"]``, in the order of ``runs``
-    :param open_env: the task whose runs are not all in
+    :param matrices: the normalised AUC of every algorithm, (runs, tasks), as ``normalised_auc`` gives them
+    :param column: the task whose runs are not all in (``normalised_auc``'s column)
     :param reps: bootstrap resamples, as the aggregate will use
     :param p: places of the present minimum in the widened range
     :param q: places of the present maximum (p <= q)
     """
-    matrices, column = normalised_auc(runs, scores, open_env)
     resamples = drawn_resamples(matrices, reps)
     # arch's percentiles of rliable's 95% interval
     tail = 100 * (1 - 0.95) / 2
@@ -213,9 +211,8 @@ def auc_apart_bounds(runs: dict, scores: dict, open_env: str, reps: int, step: f
     :param step: the grid step (its inverse a whole number)
     :return: (lowest, highest) possible margin
     """
-    p, q = place_grid(step)
-    margins = apart_margins(runs, scores, open_env, reps, p, q)
-    matrices, _ = normalised_auc(runs, scores, open_env)
+    matrices, column = normalised_auc(runs, scores, open_env)
+    margins = apart_margins(matrices, column, reps, *place_grid(step))
     widening = slack(matrices[CHOICE], step) + slack(matrices[NSTEP], step)
     return float(margins.min() - widening), float(margins.max() + widening)
 

@@ -978,7 +978,9 @@ def test_headtohead2_apart_margins_are_the_aggregates_own_and_their_bounds_hold(
         ]
         aggregate = module.run_stats.aggregates(completed_runs, completed, reps=reps)
         margin = aggregate["iqm_auc"][module.CHOICE][1] - aggregate["iqm_auc"][module.NSTEP][2]
-        computed = module.apart_margins(runs, scores, "LunarLander-v3", reps, np.array([p]), np.array([q]))
+        computed = module.apart_margins(
+            *module.normalised_auc(runs, scores, "LunarLander-v3"), reps, np.array([p]), np.array([q])
+        )
         assert np.isclose(computed[0], margin, rtol=0, atol=1e-12), (p, q, computed, margin)
         assert bounds[0] <= margin <= bounds[1], (p, q, bounds, margin)
         margins.append(margin)
