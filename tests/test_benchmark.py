@@ -900,35 +900,46 @@ def test_headtohead2_rule_from_hand_made_scores():
     assert lines[-5].endswith("4 of 4 tasks (all needed)"), lines
 
 
-def test_headtohead2_auc_gap_bounds_hold_whatever_the_missing_runs_show():
-    """The bounds of part 2 read early contain the gap that any completion of the open task gives."""
-    module = load_script("headtohead2_rule")
-    rng = np.random.default_rng(0)
-    envs = ["CartPole-v1", "MountainCar-v0", "LunarLander-v3", "Acrobot-v1"]
+def hand_made_open_grid(module, rng: np.random.Generator, qrdqn_runs: int, choice_mean: float) -> tuple[dict, dict]:
+    """Seeds 20-29 of the four algorithms on the four tasks, QR-DQN's LunarLander-v3 cell short of ``qrdqn_runs`` runs."""
     runs, scores = {}, {}
-    for env in envs:
+    for env in ["CartPole-v1", "MountainCar-v0", "LunarLander-v3", "Acrobot-v1"]:
         for algo in module.ALGOS:
-            n_runs = 3 if (algo == "qrdqn" and env == "LunarLander-v3") else 10
+            n_runs = qrdqn_runs if (algo == "qrdqn" and env == "LunarLander-v3") else 10
             runs.setdefault(env, {})[algo] = [
                 module.run_stats.Run(algo, env, seed, 100, np.array([100]), np.array([0.0]), None)
                 for seed in range(20, 20 + n_runs)
             ]
-            auc = rng.normal(1.0 if algo == module.CHOICE else 0.0, 1.0, n_runs)
+            auc = rng.normal(choice_mean if algo == module.CHOICE else 0.0, 1.0, n_runs)
             scores.setdefault(env, {})[algo] = {"final": auc, "auc": auc, "steps": np.ones(n_runs)}
+    return runs, scores
+
+
+def completed_grid(module, runs: dict, scores: dict, to_come: np.ndarray) -> tuple[dict, dict]:
+    """``hand_made_open_grid``'s grid with QR-DQN's LunarLander-v3 cell completed to seeds 20-29 by ``to_come``."""
+    completed_runs = {env: dict(by_algo) for env, by_algo in runs.items()}
+    completed = {env: dict(by_algo) for env, by_algo in scores.items()}
+    completed["LunarLander-v3"]["qrdqn"] = {
+        key: np.concatenate([values, to_come]) for key, values in scores["LunarLander-v3"]["qrdqn"].items()
+    }
+    completed_runs["LunarLander-v3"]["qrdqn"] = [
+        module.run_stats.Run("qrdqn", "LunarLander-v3", seed, 100, np.array([100]), np.array([0.0]), None)
+        for seed in range(20, 30)
+    ]
+    return completed_runs, completed
+
+
+def test_headtohead2_auc_gap_bounds_hold_whatever_the_missing_runs_show():
+    """The bounds of part 2 read early contain the gap that any completion of the open task gives."""
+    module = load_script("headtohead2_rule")
+    rng = np.random.default_rng(0)
+    runs, scores = hand_made_open_grid(module, rng, qrdqn_runs=3, choice_mean=1.0)
     assert module.open_task(scores) == "LunarLander-v3"
     low, high = module.auc_gap_bounds(runs, scores, "LunarLander-v3", step=0.01)
     assert low < high
-    qrdqn = scores["LunarLander-v3"]["qrdqn"]["auc"]
     # The seven runs to come: inside the present range, far outside it, or anywhere between
     for scale in (0.1, 1.0, 10.0, 1e4):
-        completed = {env: dict(by_algo) for env, by_algo in scores.items()}
-        completed_runs = {env: dict(by_algo) for env, by_algo in runs.items()}
-        extra = rng.normal(0.0, scale, 7)
-        completed["LunarLander-v3"]["qrdqn"] = {key: np.concatenate([qrdqn, extra]) for key in ("final", "auc", "steps")}
-        completed_runs["LunarLander-v3"]["qrdqn"] = [
-            module.run_stats.Run("qrdqn", "LunarLander-v3", seed, 100, np.array([100]), np.array([0.0]), None)
-            for seed in range(20, 30)
-        ]
+        completed_runs, completed = completed_grid(module, runs, scores, rng.normal(0.0, scale, 7))
         aggregate = module.run_stats.aggregates(completed_runs, completed, reps=10)
         gap = aggregate["iqm_auc"][module.CHOICE][0] - aggregate["iqm_auc"][module.NSTEP][0]
         assert low <= gap <= high, (scale, low, gap, high)
@@ -947,17 +958,7 @@ def test_headtohead2_apart_margins_are_the_aggregates_own_and_their_bounds_hold(
     """
     module = load_script("headtohead2_rule")
     rng = np.random.default_rng(1)
-    envs = ["CartPole-v1", "MountainCar-v0", "LunarLander-v3", "Acrobot-v1"]
-    runs, scores = {}, {}
-    for env in envs:
-        for algo in module.ALGOS:
-            n_runs = 4 if (algo == "qrdqn" and env == "LunarLander-v3") else 10
-            runs.setdefault(env, {})[algo] = [
-                module.run_stats.Run(algo, env, seed, 100, np.array([100]), np.array([0.0]), None)
-                for seed in range(20, 20 + n_runs)
-            ]
-            auc = rng.normal(0.5 if algo == module.CHOICE else 0.0, 1.0, n_runs)
-            scores.setdefault(env, {})[algo] = {"final": auc, "auc": auc, "steps": np.ones(n_runs)}
+    runs, scores = hand_made_open_grid(module, rng, qrdqn_runs=4, choice_mean=0.5)
     present = np.concatenate([values["auc"] for values in scores["LunarLander-v3"].values()])
     low, high = present.min(), present.max()
     reps = 200
@@ -967,16 +968,7 @@ def test_headtohead2_apart_margins_are_the_aggregates_own_and_their_bounds_hold(
         # Six runs to come: two of them set the widened range [low', high'], in which [low, high] sits at [p, q]
         span = (high - low) / (q - p)
         to_come = np.array([low - p * span, low - p * span + span, *rng.uniform(low, high, 4)])
-        completed = {env: dict(by_algo) for env, by_algo in scores.items()}
-        completed_runs = {env: dict(by_algo) for env, by_algo in runs.items()}
-        completed["LunarLander-v3"]["qrdqn"] = {
-            key: np.concatenate([values, to_come]) for key, values in scores["LunarLander-v3"]["qrdqn"].items()
-        }
-        completed_runs["LunarLander-v3"]["qrdqn"] = [
-            module.run_stats.Run("qrdqn", "LunarLander-v3", seed, 100, np.array([100]), np.array([0.0]), None)
-            for seed in range(20, 30)
-        ]
-        aggregate = module.run_stats.aggregates(completed_runs, completed, reps=reps)
+        aggregate = module.run_stats.aggregates(*completed_grid(module, runs, scores, to_come), reps=reps)
         margin = aggregate["iqm_auc"][module.CHOICE][1] - aggregate["iqm_auc"][module.NSTEP][2]
         computed = module.apart_margins(
             *module.normalised_auc(runs, scores, "LunarLander-v3"), reps, np.array([p]), np.array([q])
