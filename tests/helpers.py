@@ -1,7 +1,13 @@
 """Checks that several test modules share (pytest puts this folder on the import path; it collects no tests here)."""
 
+import importlib.util
+from pathlib import Path
+from types import ModuleType
+
 import torch as th
 from stable_baselines3.common.base_class import BaseAlgorithm
+
+SCRIPTS = Path(__file__).resolve().parents[1] / "scripts"
 
 
 def assert_same_parameters(ours: BaseAlgorithm, reference: BaseAlgorithm) -> None:
@@ -10,3 +16,12 @@ def assert_same_parameters(ours: BaseAlgorithm, reference: BaseAlgorithm) -> Non
         ours.policy.state_dict().items(), reference.policy.state_dict().items(), strict=True
     ):
         assert th.equal(ours_param, reference_param), name
+
+
+def load_script(name: str) -> ModuleType:
+    """``scripts/<name>.py`` as a module (the scripts are not a package)."""
+    spec = importlib.util.spec_from_file_location(f"{name}_script", SCRIPTS / f"{name}.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module

@@ -6,28 +6,19 @@ and that each run's timers nest (its training time is part of its learn() time).
 """
 
 import hashlib
-import importlib.util
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import SCRIPTS, load_script
 from stable_baselines3 import DQN
 
 from sb3_offon import OffOnDQN
 
-SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "bench_speed.py"
 HYPERPARAMS = dict(
     learning_starts=100, train_freq=16, gradient_steps=8, batch_size=32, buffer_size=1000, policy_kwargs=dict(net_arch=[16])
 )
 TIMESTEPS = 600
-
-
-def load_script():
-    spec = importlib.util.spec_from_file_location("bench_speed", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def parameters_digest(model) -> str:
@@ -40,7 +31,7 @@ def parameters_digest(model) -> str:
     ids=["dqn-paper", "nstep-lambda"],
 )
 def test_runs_taking_turns_learn_what_they_learn_alone(monkeypatch, extra_kwargs):
-    bench_speed = load_script()
+    bench_speed = load_script("bench_speed")
     # Keep each pair's models, to compare them with runs made alone
     built = []
     original_build = bench_speed.build
@@ -71,7 +62,7 @@ def test_runs_taking_turns_learn_what_they_learn_alone(monkeypatch, extra_kwargs
 
 
 def test_baton_alternates_and_lets_the_survivor_run_on():
-    bench_speed = load_script()
+    bench_speed = load_script("bench_speed")
     baton = bench_speed.Baton("a", "b")
     assert baton.holder == "a"
     baton.hand_over("a")
@@ -85,8 +76,8 @@ def test_baton_alternates_and_lets_the_survivor_run_on():
 @pytest.mark.parametrize("name", ["cartpole", "lambda_lunarlander", "lambda_lunarlander_vs_nstep"])
 def test_tables_say_which_baseline_the_dqn_columns_are(name):
     """The tables' "DQN" columns are n-step DQN's with ``--baseline dqn_nstep``: the table says so, and only then."""
-    module = load_script()
-    result = json.loads((SCRIPT.parents[1] / "results" / "speed" / f"{name}.json").read_text())
+    module = load_script("bench_speed")
+    result = json.loads((SCRIPTS.parent / "results" / "speed" / f"{name}.json").read_text())
     table = module.markdown_table(result)
     said = "The DQN columns and rows are the baseline's: SB3's DQN with n_steps=10 (n-step DQN)." in table.splitlines()
     assert said == (result.get("baseline", "dqn") == "dqn_nstep")

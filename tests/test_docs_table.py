@@ -1,19 +1,10 @@
 """``scripts/docs_table.py`` on a tiny fake results folder, against mean ± std computed by hand."""
 
-import importlib.util
 import json
 from pathlib import Path
 
 import numpy as np
-
-SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "docs_table.py"
-
-
-def load_script():
-    spec = importlib.util.spec_from_file_location("docs_table", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+from helpers import load_script
 
 
 def fake_run(root: Path, algo: str, seed: int, timesteps: list[int], returns: list[list[float]], returncode: int = 0) -> None:
@@ -35,7 +26,7 @@ def test_table_mean_std(tmp_path):
     fake_run(tmp_path, "dqn", 0, [10, 20], [[1, 1], [5, 5]])
     fake_run(tmp_path, "dqn", 1, [10, 20, 30], [[1, 1], [1, 1], [1, 1]])
 
-    lines = load_script().table(tmp_path, "tuned", ["offon_dqn", "dqn"]).splitlines()
+    lines = load_script("docs_table").table(tmp_path, "tuned", ["offon_dqn", "dqn"]).splitlines()
 
     assert lines[0] == "| Env | Budget | Seeds | Metric | Off-On DQN | DQN |"
     # Final: 4 and 6, mean 5, std sqrt(2) = 1.41. DQN: 5 and 1, mean 3, std sqrt(8) = 2.83
@@ -51,7 +42,7 @@ def test_table_missing_algorithm_and_unequal_seeds(tmp_path):
     fake_run(tmp_path, "offon_dqn", 1, [10, 20, 30], [[3, 3], [3, 3], [6, 6]])
     fake_run(tmp_path, "dqn", 0, [10, 20, 30], [[1, 1], [1, 1], [2, 2]])
 
-    lines = load_script().table(tmp_path, "tuned", ["offon_dqn", "dqn", "dqn_mc"]).splitlines()
+    lines = load_script("docs_table").table(tmp_path, "tuned", ["offon_dqn", "dqn", "dqn_mc"]).splitlines()
 
     # One seed: the mean alone; no run: n/a; seeds differ between algorithms: the counts of those present
     assert lines[2] == "| CartPole-v1 | 30 | 2/1 | final | 5.0 ± 1.4 | 2.0 | n/a |"

@@ -12,6 +12,7 @@ from stable_baselines3.common.envs import SimpleMultiObsEnv
 
 import sb3_offon.offon_dqn.offon_dqn as offon_dqn_module
 from sb3_offon import PAPER_TARGETS, OffOnDQN
+from sb3_offon.offon_dqn import chunks
 
 SMALL = dict(
     learning_starts=100,
@@ -84,7 +85,7 @@ def test_trains_to_the_parameters_of_the_per_step_loop(options, n_envs):
 
 def test_chunked_gathering_trains_to_the_same_parameters(monkeypatch):
     # Chunks of 3 minibatches of 16 CartPole observations (128 bytes as float32 observations and next observations)
-    monkeypatch.setattr(offon_dqn_module, "MAX_CHUNK_BYTES", 3 * 16 * 32 + 5)
+    monkeypatch.setattr(chunks, "MAX_CHUNK_BYTES", 3 * 16 * 32 + 5)
 
     def train(algo):
         model = algo("MlpPolicy", "CartPole-v1", seed=4, buffer_size=500, gradient_steps=10, **SMALL, **MIXED)

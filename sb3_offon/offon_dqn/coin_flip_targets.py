@@ -1,16 +1,19 @@
 """
-OffOnDQN's coin-flip targets (``mc_mixing`` ``"sample"``, ``"convex"``, ``"max"``): which target each sample gets, the
-targets themselves, Sarsa's bootstrap, and the statistics of a training call.
+OffOnDQN's coin-flip targets (``mc_mixing`` ``"sample"``, ``"convex"``, ``"max"``): the training call, which target each
+sample gets, the targets themselves, Sarsa's bootstrap, and the statistics of a training call.
 """
 
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 import torch as th
 from stable_baselines3.common.logger import Logger
+from stable_baselines3.common.vec_env import VecNormalize
 from stable_baselines3.dqn.policies import QNetwork
 
 from sb3_offon.common.buffers import OffOnDictReplayBufferSamples, OffOnReplayBufferSamples
+from sb3_offon.offon_dqn.chunks import rows_of
 
 Samples = OffOnReplayBufferSamples | OffOnDictReplayBufferSamples
 
@@ -19,16 +22,90 @@ class CoinFlipTargetsMixin:
     """The targets of :class:`sb3_offon.OffOnDQN` where one is drawn per sample (see its docstring)."""
 
     # Attributes and methods of OffOnDQN (and SB3's DQN), declared for type checkers
+    replay_buffer: Any  # an Off-On buffer here (OffOnDQN.train checks it)
+    policy: Any  # DQNPolicy (SB3 declares it differently in BaseAlgorithm and DQN)
     q_net: QNetwork
     q_net_target: QNetwork
     logger: Logger
     gamma: float
+    max_grad_norm: float
     mc_prob: float
     qlearning_prob: float
     mc_mixing: str
     sarsa_target: str
     exploration_rate: float
+    target_rng: np.random.Generator
+    _n_updates: int
+    _vec_normalize_env: VecNormalize | None
+    _update_learning_rate: Callable[..., None]
+    _steps_per_chunk: Callable[[int], int]
     _to_device: Callable[[np.ndarray], th.Tensor]
+    _loss_fn: Callable[[], Callable[[th.Tensor, th.Tensor], th.Tensor]]
+
+    def _train_on_coin_flip_targets(self, gradient_steps: int, batch_size: int) -> None:
+        """
+        ``gradient_steps`` updates of the Q-network towards targets drawn per sample (see :meth:`train`): the
+        minibatches are gathered and uploaded in chunks, the target network's values of a chunk come from one forward
+        pass, the choice of targets is made on the host and the statistics are read from the device once.
+        """
+        self.policy.set_training_mode(True)
+        self._update_learning_rate(self.policy.optimizer)
+        loss_fn = self._loss_fn()
+        # All of this call's target draws at once: uniforms for the MC choice and for the Q-learning/Sarsa choice
+        uniforms = self.target_rng.random((2, gradient_steps * batch_size, 1), dtype=np.float32)
+        mc_drawn, sarsa_drawn = uniforms[0] < self.mc_prob, uniforms[1] >= self.qlearning_prob
+        # Expected Sarsa's behaviour policy is the online network, which each step changes: its targets are per step
+        targets_per_step = self.sarsa_target == "expected" and self.qlearning_prob < 1.0
+        # Listed once per call rather than walking the policy's modules at each step as SB3's DQN does (same clipping)
+        parameters = list(self.policy.parameters())
+        losses, q_taken, mc_returns, bound_active = [], [], [], []
+        n_mc_targets = n_sarsa_targets = 0
+        steps_per_chunk = self._steps_per_chunk(batch_size)
+        for first_step in range(0, gradient_steps, steps_per_chunk):
+            n_steps = min(steps_per_chunk, gradient_steps - first_step)
+            chunk = slice(first_step * batch_size, (first_step + n_steps) * batch_size)
+            batches = self.replay_buffer.sample_minibatches(n_steps, batch_size, env=self._vec_normalize_env)
+            data = batches.samples
+            use_mc, use_sarsa = self._target_choice(
+                batches.mc_returns, batches.next_actions, mc_drawn[chunk], sarsa_drawn[chunk]
+            )
+            n_mc_targets += 0 if use_mc is None else int(np.count_nonzero(use_mc))
+            n_sarsa_targets += 0 if use_sarsa is None else int(np.count_nonzero(use_sarsa))
+            if not targets_per_step:
+                with th.no_grad():
+                    targets, bound = self._targets(data, use_mc, use_sarsa)
+                bound_active += [] if bound is None else [bound]
+
+            for step in range(n_steps):
+                rows = slice(step * batch_size, (step + 1) * batch_size)
+                if targets_per_step:
+                    with th.no_grad():
+                        step_targets, bound = self._targets(
+                            rows_of(data, rows), rows_of(use_mc, rows), rows_of(use_sarsa, rows)
+                        )
+                    bound_active += [] if bound is None else [bound]
+                else:
+                    step_targets = targets[rows]
+
+                current_q_values = self.q_net(rows_of(data.observations, rows))
+                current_q_values = th.gather(current_q_values, dim=1, index=data.actions[rows].long())
+                loss = loss_fn(current_q_values, step_targets)
+
+                self.policy.optimizer.zero_grad()
+                loss.backward()
+                th.nn.utils.clip_grad_norm_(parameters, self.max_grad_norm)
+                self.policy.optimizer.step()
+
+                # Kept on the device: reading the loss back at each step, as SB3 does, would wait for the device
+                losses.append(loss.detach())
+                q_taken.append(current_q_values.detach())
+            mc_returns.append(data.mc_returns)
+
+        self._n_updates += gradient_steps
+        self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
+        self._record_target_statistics(
+            th.stack(losses), th.cat(q_taken), th.cat(mc_returns), n_mc_targets, n_sarsa_targets, bound_active
+        )
 
     def _target_choice(
         self, mc_returns: np.ndarray, next_actions: np.ndarray, mc_drawn: np.ndarray, sarsa_drawn: np.ndarray

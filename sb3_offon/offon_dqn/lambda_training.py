@@ -18,6 +18,7 @@ from stable_baselines3.common.vec_env import VecNormalize
 from stable_baselines3.dqn.policies import QNetwork
 
 from sb3_offon.common.buffers import OffOnBufferMixin
+from sb3_offon.offon_dqn.chunks import rows_of
 from sb3_offon.offon_dqn.lambda_returns import LambdaReturnCache, compute_lambda_returns
 
 # The most next observations the refresh runs through the target network at once, in rows and in bytes of float32
@@ -194,10 +195,3 @@ class LambdaTrainingMixin:
         chunks of 594 (64 MiB of floats) and 177-188 us in chunks of 48-128 (the bytes bound gives 74).
         """
         return max(1, min(LAMBDA_FORWARD_ROWS, LAMBDA_FORWARD_BYTES // max(self._observation_bytes(), 1)))
-
-
-def rows_of(value: Any, rows: slice) -> Any:
-    """The rows of a tensor, array or dict of them (views, not copies)."""
-    if isinstance(value, dict):
-        return {key: item[rows] for key, item in value.items()}
-    return value[rows]

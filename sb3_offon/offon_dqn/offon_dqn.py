@@ -21,6 +21,7 @@ from sb3_offon.common.buffers import (
     OffOnReplayBuffer,
     reward_scale,
 )
+from sb3_offon.offon_dqn.chunks import ChunkedMinibatchesMixin
 from sb3_offon.offon_dqn.coin_flip_targets import CoinFlipTargetsMixin
 from sb3_offon.offon_dqn.lambda_returns import LambdaReturnCache
 from sb3_offon.offon_dqn.lambda_training import LambdaTrainingMixin
@@ -32,8 +33,6 @@ MC_MIXING_OPTIONS = ("sample", "convex", "max", "lambda")
 SARSA_TARGET_OPTIONS = ("sampled", "expected")
 MC_TRUNCATION_OPTIONS = ("bootstrap", "terminal", "drop")
 LOSS_FUNCTIONS = {"huber": F.smooth_l1_loss, "mse": F.mse_loss}
-# At most this many bytes of observations (and as much for next observations) are gathered and uploaded at once
-MAX_CHUNK_BYTES = 64 * 2**20
 # The constructor arguments OffOnDQN adds to DQN's
 OFFON_PARAMETERS = (
     "mc_initial_prob",
@@ -63,7 +62,7 @@ def _real_number(name: str, value: Any) -> float:
     return float(value)
 
 
-class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, DQN):
+class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, ChunkedMinibatchesMixin, DQN):
     """
     Offline-Online DQN: a DQN whose regression target is drawn, per sample, among the offline Monte-Carlo return
     of the finished episode, the Q-learning target and the Sarsa target.
@@ -485,92 +484,15 @@ class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, DQN):
         if not isinstance(self.replay_buffer, OffOnBufferMixin):
             super().train(gradient_steps, batch_size)
             return
+        # Each kind of target has its loop in its own mixin (coin_flip_targets.py, lambda_training.py)
         if self.mc_mixing == "lambda":
             self._train_on_lambda_returns(gradient_steps, batch_size)
-            return
-
-        self.policy.set_training_mode(True)
-        self._update_learning_rate(self.policy.optimizer)
-        loss_fn = LOSS_FUNCTIONS[self.loss]
-        # All of this call's target draws at once: uniforms for the MC choice and for the Q-learning/Sarsa choice
-        uniforms = self.target_rng.random((2, gradient_steps * batch_size, 1), dtype=np.float32)
-        mc_drawn, sarsa_drawn = uniforms[0] < self.mc_prob, uniforms[1] >= self.qlearning_prob
-        # Expected Sarsa's behaviour policy is the online network, which each step changes: its targets are per step
-        targets_per_step = self.sarsa_target == "expected" and self.qlearning_prob < 1.0
-        # Listed once per call rather than walking the policy's modules at each step as SB3's DQN does (same clipping)
-        parameters = list(self.policy.parameters())
-        losses, q_taken, mc_returns, bound_active = [], [], [], []
-        n_mc_targets = n_sarsa_targets = 0
-        steps_per_chunk = self._steps_per_chunk(batch_size)
-        for first_step in range(0, gradient_steps, steps_per_chunk):
-            n_steps = min(steps_per_chunk, gradient_steps - first_step)
-            chunk = slice(first_step * batch_size, (first_step + n_steps) * batch_size)
-            batches = self.replay_buffer.sample_minibatches(n_steps, batch_size, env=self._vec_normalize_env)
-            data = batches.samples
-            use_mc, use_sarsa = self._target_choice(
-                batches.mc_returns, batches.next_actions, mc_drawn[chunk], sarsa_drawn[chunk]
-            )
-            n_mc_targets += 0 if use_mc is None else int(np.count_nonzero(use_mc))
-            n_sarsa_targets += 0 if use_sarsa is None else int(np.count_nonzero(use_sarsa))
-            if not targets_per_step:
-                with th.no_grad():
-                    targets, bound = self._targets(data, use_mc, use_sarsa)
-                bound_active += [] if bound is None else [bound]
-
-            for step in range(n_steps):
-                rows = slice(step * batch_size, (step + 1) * batch_size)
-                if targets_per_step:
-                    with th.no_grad():
-                        step_targets, bound = self._targets(_rows(data, rows), _rows(use_mc, rows), _rows(use_sarsa, rows))
-                    bound_active += [] if bound is None else [bound]
-                else:
-                    step_targets = targets[rows]
-
-                current_q_values = self.q_net(_rows(data.observations, rows))
-                current_q_values = th.gather(current_q_values, dim=1, index=data.actions[rows].long())
-                loss = loss_fn(current_q_values, step_targets)
-
-                self.policy.optimizer.zero_grad()
-                loss.backward()
-                th.nn.utils.clip_grad_norm_(parameters, self.max_grad_norm)
-                self.policy.optimizer.step()
-
-                # Kept on the device: reading the loss back at each step, as SB3 does, would wait for the device
-                losses.append(loss.detach())
-                q_taken.append(current_q_values.detach())
-            mc_returns.append(data.mc_returns)
-
-        self._n_updates += gradient_steps
-        self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
-        self._record_target_statistics(
-            th.stack(losses), th.cat(q_taken), th.cat(mc_returns), n_mc_targets, n_sarsa_targets, bound_active
-        )
+        else:
+            self._train_on_coin_flip_targets(gradient_steps, batch_size)
 
     def _loss_fn(self) -> Any:
         # Looked up at each call, so that a test can swap the function in LOSS_FUNCTIONS
         return LOSS_FUNCTIONS[self.loss]
-
-    def _steps_per_chunk(self, batch_size: int) -> int:
-        """
-        How many minibatches to gather, upload and run through the target network at once: all of a call's, unless
-        their observations and next observations, as float32 in the networks, would take more than
-        ``MAX_CHUNK_BYTES`` (1,000 gradient steps on Atari frames would be some 7 GB).
-        """
-        sample_bytes = 2 * self._observation_bytes()
-        return max(1, MAX_CHUNK_BYTES // (batch_size * max(sample_bytes, 1)))
-
-    def _observation_bytes(self) -> int:
-        """The bytes of one observation as float32 in the networks (every key of a Dict observation)."""
-        observation_spaces: list[spaces.Space] = (
-            list(self.observation_space.spaces.values())
-            if isinstance(self.observation_space, spaces.Dict)
-            else [self.observation_space]
-        )
-        return 4 * sum(math.prod(space.shape or (1,)) for space in observation_spaces)
-
-    def _to_device(self, array: np.ndarray) -> th.Tensor:
-        # from_numpy then to(): a few times cheaper than as_tensor(..., device=...) for a small array on the CPU
-        return th.from_numpy(array).to(self.device)
 
     def learn(
         self: SelfOffOnDQN,
@@ -593,14 +515,3 @@ class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, DQN):
     def _excluded_save_params(self) -> list[str]:
         # The schedules are rebuilt from their parameters in _setup_model
         return [*super()._excluded_save_params(), "mc_schedule", "qlearning_schedule", "_lambda_cache"]
-
-
-def _rows(value: Any, rows: slice) -> Any:
-    """The rows of a tensor, array, dict of them or samples NamedTuple (views, not copies); None stays None."""
-    if value is None:
-        return None
-    if isinstance(value, tuple):
-        return type(value)(*(_rows(item, rows) for item in value))
-    if isinstance(value, dict):
-        return {key: item[rows] for key, item in value.items()}
-    return value[rows]
