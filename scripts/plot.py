@@ -136,15 +136,23 @@ def plot_curves(env: str, by_algo: dict[str, list[Run]], hyperparams_set: str, r
         plot_band(ax, grid, curves, algo, reps, f"{len(runs)} seed{'s' * (len(runs) > 1)}")
     if threshold(env) is not None:
         ax.axhline(threshold(env), color="grey", linestyle="--", linewidth=1, label=f"threshold {threshold(env):g}")
-    figure = f", as the paper's {PAPER_FIGURES[env]}" if env in PAPER_FIGURES else ""
     ax.set(
-        title=f"{env}: '{hyperparams_set}' settings{figure}",
+        title=curves_title(env, by_algo, hyperparams_set),
         xlabel="Environment steps",
         ylabel="Evaluation return (deterministic)",
     )
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     save(fig, out / f"curves_{env}.png", written)
+
+
+def curves_title(env: str, by_algo: dict[str, list[Run]], grid: str) -> str:
+    """The env, the hyperparameter set(s) its runs trained with, and the grid's name where it is not that set."""
+    settings = sorted({run.settings or grid for runs in by_algo.values() for run in runs})
+    named = "', '".join(settings)
+    figure = f", as the paper's {PAPER_FIGURES[env]}" if env in PAPER_FIGURES else ""
+    title = f"{env}: '{named}' settings{figure}"
+    return title if settings == [grid] else f"{title}\ngrid '{grid}'"  # on a line of its own: the figure is narrow
 
 
 def episodes_to_stop(lengths: np.ndarray) -> int | None:

@@ -56,6 +56,9 @@ class Run:
     timesteps: np.ndarray  # evaluation steps
     returns: np.ndarray  # mean return of each evaluation
     episodes: pd.DataFrame  # training episodes, in order: r, l, t (+ goal_reached)
+    # The hyperparameter set it trained with (its spec's "set"), which a grid's folder need not be named after: the
+    # head-to-heads ran the "tuned" set into results/raw/headtohead*/ ("": not recorded)
+    settings: str = ""
 
 
 def load_run(folder: Path) -> Run | None:
@@ -80,6 +83,7 @@ def load_run(folder: Path) -> Run | None:
         timesteps=timesteps.astype(np.int64),
         returns=results.mean(axis=1),
         episodes=episodes.reset_index(drop=True),
+        settings=spec.get("set", ""),
     )
 
 

@@ -376,3 +376,20 @@ def test_bootstrap_intervals_are_the_same_at_every_redraw():
     for a, b in zip(first, second, strict=True):
         np.testing.assert_array_equal(a, b)
     assert np.all(first[1] < first[0]) and np.all(first[0] < first[2]), "a real interval around the mean"
+
+
+def test_curves_title_names_the_settings_the_runs_trained_with():
+    module = load_script("plot")
+
+    def runs(*settings: str) -> dict:
+        return {"dqn": [module.Run("dqn", "Acrobot-v1", 0, 100, np.array([100]), np.array([0.0]), None, s) for s in settings]}
+
+    assert module.curves_title("Acrobot-v1", runs("tuned", "tuned"), "headtohead2") == (
+        "Acrobot-v1: 'tuned' settings\ngrid 'headtohead2'"
+    )
+    assert module.curves_title("Acrobot-v1", runs("tuned"), "tuned") == "Acrobot-v1: 'tuned' settings"
+    assert module.curves_title("Acrobot-v1", runs(""), "paper") == "Acrobot-v1: 'paper' settings"  # not recorded
+    mixed = module.curves_title("Acrobot-v1", runs("paper", "tuned"), "mixed")
+    assert mixed == "Acrobot-v1: 'paper', 'tuned' settings\ngrid 'mixed'"
+    lunar = module.curves_title("LunarLander-v3", runs("paper"), "paper")
+    assert lunar == f"LunarLander-v3: 'paper' settings, as the paper's {module.PAPER_FIGURES['LunarLander-v3']}"
