@@ -105,10 +105,7 @@ def test_expected_sarsa_target_at_qlearning_0(model):
     model.exploration_rate = 0.3
     _, _, expected = reference_targets(model, data)
     model.sarsa_target = "expected"
-    try:
-        targets, _, use_sarsa = targets_at(model, data, mc=0.0, qlearning=0.0)
-    finally:
-        model.sarsa_target = "sampled"
+    targets, _, use_sarsa = targets_at(model, data, mc=0.0, qlearning=0.0)
     th.testing.assert_close(targets, expected)
     assert bool(use_sarsa.all())
 
@@ -117,10 +114,7 @@ def test_convex_mixing(model):
     data = crafted_batch(model)
     qlearning, _, _ = reference_targets(model, data)
     model.mc_mixing = "convex"
-    try:
-        targets, _, _ = targets_at(model, data, mc=0.25, qlearning=1.0)
-    finally:
-        model.mc_mixing = "sample"
+    targets, _, _ = targets_at(model, data, mc=0.25, qlearning=1.0)
     known = ~th.isnan(data.mc_returns)
     th.testing.assert_close(targets[known], 0.25 * data.mc_returns[known] + 0.75 * qlearning[known])
     th.testing.assert_close(targets[~known], qlearning[~known])
@@ -134,15 +128,12 @@ def test_max_mixing_uses_the_return_as_a_lower_bound(model):
     data.mc_returns[::3] = float("nan")
     model.mc_mixing = "max"
     model.mc_prob, model.qlearning_prob = 1.0, 1.0
-    try:
-        all_drawn = np.ones((len(qlearning), 1), dtype=bool)
-        targets, use_mc, use_sarsa, bound_active = choose_and_compute(model, data, all_drawn, ~all_drawn)
-        # Half drawn for MC: the others keep their TD target (here Sarsa where a' is known), whatever G says
-        half = np.arange(len(qlearning)).reshape(-1, 1) % 2 == 0
-        model.qlearning_prob = 0.0
-        mixed, _, use_sarsa_mixed, _ = choose_and_compute(model, data, half, all_drawn)
-    finally:
-        model.mc_mixing = "sample"
+    all_drawn = np.ones((len(qlearning), 1), dtype=bool)
+    targets, use_mc, use_sarsa, bound_active = choose_and_compute(model, data, all_drawn, ~all_drawn)
+    # Half drawn for MC: the others keep their TD target (here Sarsa where a' is known), whatever G says
+    half = np.arange(len(qlearning)).reshape(-1, 1) % 2 == 0
+    model.qlearning_prob = 0.0
+    mixed, _, use_sarsa_mixed, _ = choose_and_compute(model, data, half, all_drawn)
     known = ~th.isnan(data.mc_returns)
     above = known & (data.mc_returns > qlearning)
     th.testing.assert_close(targets[above], data.mc_returns[above])

@@ -10,6 +10,11 @@ import yaml
 from helpers import SCRIPTS, load_script
 
 
+def cell(name: str, table: list[str], column: int = -2) -> str:
+    """The cell ``column`` (from the right) of candidate ``name``'s row in a markdown table of the search."""
+    return next(line for line in table if line.startswith(f"| {name} |")).rstrip(" |").split(" | ")[column]
+
+
 def test_search_runs_the_seeds_it_is_given(tmp_path: Path):
     """``search.py run --seeds 3`` is seed 3 (benchmark.py alone would read a lone number as a count)."""
     module = load_script("search")
@@ -126,20 +131,17 @@ def test_search_round3_decides_without_the_seeds_that_cannot_change_the_choice()
         everything[module.ROUND2_REFERENCE] = scores([250.0] * 5, auc=0.25)
         return module.round3_lines(everything, dict(middle))
 
-    def verdict(name: str, table: list[str]) -> str:
-        return next(line for line in table if line.startswith(f"| {name} |")).rstrip(" |").split(" | ")[-2]
-
     first, second = module.ROUND3_CANDIDATES[:2]
     # Three seeds summing to 0: (0 + 2 x 500) / 5 = 200 < 240, out; summing to 201: (201 + 1000) / 5 = 240.2, still open
     out = lines({first: scores([0.0, 0.0, 0.0], n_seeds=3, auc=0.9)})
-    assert verdict(first, out) == "no: cannot reach it on CartPole-v1"
+    assert cell(first, out) == "no: cannot reach it on CartPole-v1"
     assert out[-1].startswith("**Choice** (the highest") and f": {first}," not in out[-1]
     still_open = lines({first: scores([67.0, 67.0, 67.0], n_seeds=3, auc=0.9)})
-    assert verdict(first, still_open) == "pending (below so far)" and still_open[-1].startswith("**Choice: pending** (5 of 6")
+    assert cell(first, still_open) == "pending (below so far)" and still_open[-1].startswith("**Choice: pending** (5 of 6")
     # A task with no ceiling (MountainCar) missing seeds never decides early, however low its mean so far
     low_mountaincar = scores([250.0] * 5)
     low_mountaincar["MountainCar-v0"] = np.array([[-200.0, -200.0]] * 3)
-    assert verdict(second, lines({second: low_mountaincar})) == "pending (below so far)"
+    assert cell(second, lines({second: low_mountaincar})) == "pending (below so far)"
 
 
 def test_search_round3_cuts_ramp_over_each_tasks_exploration_period(tmp_path: Path):
@@ -201,24 +203,21 @@ def test_search_round4_judges_frozenlake_on_ten_seeds():
         everything[module.ROUND2_REFERENCE] = scores([0.5] * 5, auc=0.25)
         return module.round4_lines(everything, dict(dqn))
 
-    def verdict(name: str, table: list[str]) -> str:
-        return next(line for line in table if line.startswith(f"| {name} |")).rstrip(" |").split(" | ")[-2]
-
     first, second = module.ROUND4_CANDIDATES[:2]
     # Ten seeds averaging 0.485 pass (bar 0.48); averaging 0.475 do not
     passing = lines({first: scores([0.4, 0.57] * 5, auc=0.3)})
-    assert verdict(first, passing) == "yes" and passing[-1].endswith(f": {first}, 0.300, above nstep10's")
+    assert cell(first, passing) == "yes" and passing[-1].endswith(f": {first}, 0.300, above nstep10's")
     failing = lines({first: scores([0.4, 0.55] * 5, auc=0.3)})
-    assert verdict(first, failing) == "no" and f": {first}," not in failing[-1]
+    assert cell(first, failing) == "no" and f": {first}," not in failing[-1]
     # Five FrozenLake seeds of ten: pending, however good; below the bar even at 1.0 on the other five: out
-    assert verdict(second, lines({second: scores([0.9] * 5)})) == "pending"
+    assert cell(second, lines({second: scores([0.9] * 5)})) == "pending"
     assert lines({second: scores([0.9] * 5)})[-1].startswith("**Choice: pending** (2 of 3 candidates decided)")
     # (0 x 5 + 1.0 x 5) / 10 = 0.5 can still reach 0.48; (0 x 6 + 1.0 x 4) / 10 = 0.4 cannot
-    assert verdict(second, lines({second: scores([0.0] * 5)})) == "pending (below so far)"
-    assert verdict(second, lines({second: scores([0.0] * 6)})) == "no: cannot reach it on FrozenLake-v1"
+    assert cell(second, lines({second: scores([0.0] * 5)})) == "pending (below so far)"
+    assert cell(second, lines({second: scores([0.0] * 6)})) == "no: cannot reach it on FrozenLake-v1"
     # Until DQN's ten FrozenLake seeds are done, nothing is decided on that task, and no choice is made
     pending_reference = lines({second: scores([0.0] * 6)}, dqn=middle | {"FrozenLake-v1": np.nan})
-    assert verdict(second, pending_reference) == "pending (below so far)"
+    assert cell(second, pending_reference) == "pending (below so far)"
     assert pending_reference[-1] == "**Choice: pending** (DQN's reference not finished on FrozenLake-v1)"
 
 
@@ -265,9 +264,6 @@ def test_search_round5_screen_from_hand_made_scores():
             everything, list(candidates), "dqn_r5", descriptions, ranges, 0.02, 5, search.BENCHMARK_ENVS, 0.82
         )
 
-    def verdict(name: str, lines: list[str]) -> str:
-        return next(line for line in lines if line.startswith(f"| {name} |")).rstrip(" |").split(" | ")[-1]
-
     # As DQN: passes. 3% of the range below on CartPole with a 5% spread: not shown below (the interval reaches above
     # -2%). 30% below on LunarLander: shown below there. The choice is the fastest of those that pass.
     lines = table(
@@ -277,8 +273,8 @@ def test_search_round5_screen_from_hand_made_scores():
             "far_below": scores(0.95, {"LunarLander-v3": -0.3}),
         }
     )
-    assert verdict("same", lines) == "yes" and verdict("noisy_lower", lines) == "yes"
-    assert verdict("far_below", lines) == "no: shown below on LunarLander-v3"
+    assert cell("same", lines, -1) == "yes" and cell("noisy_lower", lines, -1) == "yes"
+    assert cell("far_below", lines, -1) == "no: shown below on LunarLander-v3"
     assert lines[-1] == (
         "**Choice** (the highest mean normalised AUC among those not shown below DQN): noisy_lower, 0.900, "
         "above nstep10's 0.820 (seeds 0-4), above DQN's 0.400 (same seeds)"
@@ -286,8 +282,8 @@ def test_search_round5_screen_from_hand_made_scores():
     assert table({"far_below": scores(0.95, {"LunarLander-v3": -0.3})})[-1].startswith("**Choice: none**")
     # Four seeds of the reference, or of a candidate: nothing judged, no choice
     short = table({"same": scores(0.6)}, reference=scores(0.4, seeds=4))
-    assert verdict("same", short) == "pending" and short[-1].startswith("**Choice: pending** (0 of 1")
-    assert verdict("same", table({"same": scores(0.6, seeds=4)})) == "pending"
+    assert cell("same", short, -1) == "pending" and short[-1].startswith("**Choice: pending** (0 of 1")
+    assert cell("same", table({"same": scores(0.6, seeds=4)}), -1) == "pending"
     # The bound itself: below only when the interval's upper end is under minus the tolerance
     assert screen.shown_below((-20.0, -30.0, -10.5), 10.0) and not screen.shown_below((-20.0, -30.0, -10.0), 10.0)
     assert not screen.shown_below((-20.0, np.nan, np.nan), 10.0)
