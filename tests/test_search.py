@@ -110,9 +110,9 @@ def test_search_round3_choice_from_hand_made_scores():
     # Nobody within the bar: no choice; a candidate with four seeds: pending
     below = {name: scores(0.05, 0.3) for name in module.ROUND3_CANDIDATES}
     assert lines(below)[-1].startswith("**Choice: none**")
-    assert lines({first: scores(0.0, 0.3, n_seeds=4)})[-1].startswith("**Choice: pending** (5 of 6")
-    row = next(line for line in lines({first: scores(0.0, 0.3, n_seeds=4)}) if line.startswith(f"| {first} |"))
-    assert row.rstrip(" |").split(" | ")[-2:] == ["pending", "pending"]
+    four_seeds = lines({first: scores(0.0, 0.3, n_seeds=4)})
+    assert four_seeds[-1].startswith("**Choice: pending** (5 of 6")
+    assert [cell(first, four_seeds, -2), cell(first, four_seeds, -1)] == ["pending", "pending"]
 
 
 def test_search_round3_decides_without_the_seeds_that_cannot_change_the_choice():
