@@ -2,7 +2,10 @@
 
 from pathlib import Path
 
-from sb3_offon import envs  # noqa: F401  (registers CartPoleFallPenalty-v1 and MountainCarGoalBonus-v0)
+from sb3_offon import (
+    envs,  # noqa: F401  (registers CartPoleFallPenalty-v1 and MountainCarGoalBonus-v0)
+    minatar_envs,  # noqa: F401  (registers the MinAtar/* ids)
+)
 from sb3_offon.common.buffers import (
     OffOnDictReplayBuffer,
     OffOnDictReplayBufferSamples,
@@ -12,6 +15,7 @@ from sb3_offon.common.buffers import (
 )
 from sb3_offon.offon_dqn import CnnPolicy, MlpPolicy, MultiInputPolicy, OffOnDQN
 from sb3_offon.presets import LAMBDA_CHOICE_TARGETS, PAPER_TARGETS
+from sb3_offon.torch_layers import MinAtarCNN
 from sb3_offon.variants import DQNMC, DQNSarsa
 
 # The version is written once, in version.txt (read by setuptools too, see pyproject.toml)
@@ -23,6 +27,7 @@ __all__ = [
     "PAPER_TARGETS",
     "CnnPolicy",
     "DQNSarsa",
+    "MinAtarCNN",
     "MlpPolicy",
     "MultiInputPolicy",
     "OffOnDQN",

@@ -33,6 +33,7 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 import sb3_offon.envs  # noqa: F401
 from sb3_offon.offon_dqn import OffOnDQN
 from sb3_offon.offon_dqn.offon_dqn import LOSS_FUNCTIONS, MC_MIXING_OPTIONS, MC_TRUNCATION_OPTIONS, SARSA_TARGET_OPTIONS
+from sb3_offon.torch_layers import MinAtarCNN
 from sb3_offon.variants import DQNMC, DQNSarsa
 
 HYPERPARAMS_DIR = Path(__file__).resolve().parent / "hyperparams"
@@ -250,3 +251,6 @@ def register() -> None:
     # Our optuna parameter names are the constructor's: the off-policy converter passes them through
     zoo_hyperparams_opt.HYPERPARAMS_CONVERTER.update({name: convert_offpolicy_params for name in ALGOS})
     zoo_train.ExperimentManager = OffOnExperimentManager  # type: ignore[misc]
+    # The zoo evaluates a YAML file's `policy_kwargs` string in the namespace of its exp_manager module (which has
+    # `th` and `nn`): the MinAtar entries' "dict(features_extractor_class=MinAtarCNN, ...)" finds the class there
+    zoo_exp_manager.MinAtarCNN = MinAtarCNN  # type: ignore[attr-defined]

@@ -219,8 +219,13 @@ def default_device(policy: str) -> str:
     return "cpu" if policy == "MlpPolicy" else "auto"
 
 
+def env_folder(env: str) -> str:
+    """An env id as a folder name, as the zoo writes it: ``MinAtar/Breakout-v0`` -> ``MinAtar-Breakout-v0``."""
+    return env.replace("/", "-")
+
+
 def run_dir(root: Path, spec: dict) -> Path:
-    return root / spec.get("grid", spec["set"]) / spec["algo"] / f"{spec['env']}_{spec['seed']}"
+    return root / spec.get("grid", spec["set"]) / spec["algo"] / f"{env_folder(spec['env'])}_{spec['seed']}"
 
 
 def run_threads(spec: dict) -> str:
@@ -252,7 +257,7 @@ def run_one(spec: dict) -> dict:
         ``started``/``finished`` (UTC, ISO 8601), ``host``, ``command`` and ``files`` (relative path -> bytes: the zoo's
         run folder without models and replay buffers, plus ``train.log``, the tail of the output)
     """
-    scratch = Path(tempfile.mkdtemp(prefix=f"offon_{spec['algo']}_{spec['env']}_{spec['seed']}_"))
+    scratch = Path(tempfile.mkdtemp(prefix=f"offon_{spec['algo']}_{env_folder(spec['env'])}_{spec['seed']}_"))
     command = train_command(spec, "logs")
     # The run's threads, already at import time (torch.set_num_threads comes later, from --num-threads)
     threads = run_threads(spec)
@@ -275,7 +280,7 @@ def run_one(spec: dict) -> dict:
     wall_time = time.perf_counter() - start
     files: dict[str, bytes] = {}
     # The zoo writes logs/{algo}/{env}_1/ in the empty scratch folder
-    zoo_runs = sorted((scratch / "logs" / spec["algo"]).glob(f"{spec['env']}_*"))
+    zoo_runs = sorted((scratch / "logs" / spec["algo"]).glob(f"{env_folder(spec['env'])}_*"))
     if zoo_runs:
         for path in sorted(zoo_runs[-1].rglob("*")):
             if path.is_file() and (path.suffix in KEEP_SUFFIXES or path.name in KEEP_NAMES):

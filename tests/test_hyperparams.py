@@ -16,6 +16,7 @@ from stable_baselines3 import DQN
 
 from sb3_offon import OffOnDQN
 from sb3_offon.callbacks import GoalCountCallback, StopOnMeanTrainingReward
+from sb3_offon.minatar_envs import minatar_ids
 from sb3_offon.offon_dqn.offon_dqn import OFFON_PARAMETERS
 from sb3_offon.variants import DQNMC, DQNSarsa
 from sb3_offon.zoo import ALGOS, HYPERPARAMS_DIR, SAMPLERS, register, resolve_config
@@ -32,6 +33,10 @@ LAMBDA_CLASSES = {"offon_lambda": OffOnDQN, "offon_lambda_choice": OffOnDQN}
 CLASSES = {**PAPER_CLASSES, **BASELINE_CLASSES, **CHOICE_CLASSES, **LAMBDA_CLASSES}
 BASELINE_ENVS = {"default", "atari", "CartPole-v1", "MountainCar-v0", "LunarLander-v3", "Acrobot-v1"}
 CHOICE_ENVS = BASELINE_ENVS | {"FrozenLake-v1"}
+# The MinAtar games' entries (tests/test_minatar.py checks their values): in the files of the MinAtar head-to-head's
+# algorithms, and in offon_lambda.yml, which offon_lambda_choice.yml repeats entry for entry
+MINATAR_ENVS = set(minatar_ids())
+MINATAR_FILES = {"dqn", "dqn_nstep", "qrdqn", "offon_dqn", "offon_lambda", "offon_lambda_choice"}
 # The search's winner, `mc_sample` (results/search/README.md): the paper's delta1 schedule, no Sarsa, SB3's loss
 CHOICE_TARGETS = dict(
     mc_initial_prob=0.99,
@@ -88,7 +93,10 @@ def test_every_algorithm_has_its_entries(folder: Path) -> None:
         assert set(load(folder / f"{algo}.yml")) >= (REQUIRED_ENVS if folder == HYPERPARAMS_DIR else PAPER_ENVS), algo
     if folder == HYPERPARAMS_DIR:
         for algo in BASELINE_CLASSES:
-            assert set(load(folder / f"{algo}.yml")) == BASELINE_ENVS, algo
+            assert set(load(folder / f"{algo}.yml")) == BASELINE_ENVS | MINATAR_ENVS, algo
+        for algo in CLASSES:
+            has_minatar = MINATAR_ENVS <= set(load(folder / f"{algo}.yml"))
+            assert has_minatar == (algo in MINATAR_FILES), algo
         assert set(load(folder / "offon_choice.yml")) == CHOICE_ENVS
 
 
@@ -96,10 +104,13 @@ def test_baselines_are_the_zoo_settings() -> None:
     """n-step DQN is the zoo's DQN entry plus n_steps; QR-DQN the zoo's own tuned entries, unchanged."""
     dqn = load(HYPERPARAMS_DIR / "dqn.yml")
     for env_id, entry in load(HYPERPARAMS_DIR / "dqn_nstep.yml").items():
+        if env_id in MINATAR_ENVS:
+            continue
         assert entry["n_steps"] in (3, 5, 10), env_id
         assert {key: value for key, value in entry.items() if key != "n_steps"} == dqn[env_id], env_id
     zoo = load(Path(rl_zoo3.__file__).parent / "hyperparams" / "qrdqn.yml")
-    assert load(HYPERPARAMS_DIR / "qrdqn.yml") == {env_id: zoo[env_id] for env_id in BASELINE_ENVS}
+    ours = load(HYPERPARAMS_DIR / "qrdqn.yml")
+    assert {env_id: ours[env_id] for env_id in BASELINE_ENVS} == {env_id: zoo[env_id] for env_id in BASELINE_ENVS}
 
 
 def test_nstep_entries_are_the_search_choice() -> None:
@@ -138,7 +149,7 @@ def test_lambda_file_is_the_dqn_settings_with_lambda_targets() -> None:
     lambda_targets = {**CHOICE_TARGETS, "mc_initial_prob": 0.9, "mc_final_prob": 0.9, "mc_mixing": "lambda"}
     lambda_targets.update(lambda_block_size=100, lambda_refresh_interval=None)
     entries = load(HYPERPARAMS_DIR / "offon_lambda.yml")
-    assert set(entries) == CHOICE_ENVS
+    assert set(entries) == CHOICE_ENVS | MINATAR_ENVS
     for env_id, entry in entries.items():
         assert {key: entry[key] for key in TARGET_KEYS & set(entry)} == lambda_targets, env_id
         assert {key: value for key, value in entry.items() if key not in TARGET_KEYS} == dqn[env_id], env_id
