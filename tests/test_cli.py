@@ -14,12 +14,14 @@ from pathlib import Path
 import numpy as np
 import optuna
 import pytest
+import torch as th
 import yaml
 from rl_zoo3.utils import ALGOS
 
-from sb3_offon import OffOnDQN
+from sb3_offon import MinAtarCNN, OffOnDQN
 from sb3_offon.enjoy import ReplayLoader
 from sb3_offon.enjoy import main as enjoy_main
+from sb3_offon.offon_dqn.policies import DuelingHead
 from sb3_offon.zoo import HYPERPARAMS_DIR, register
 
 # Ours and SB3's DQN, all from the zoo's table
@@ -88,6 +90,17 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, subp
     commands["goal_bonus"] = [
         *["sb3_offon.train", "--algo", "dqn_mc", "--env", "MountainCarGoalBonus-v0", "-n", "450", *COMMON],
         *["--eval-freq", "-1", "--log-interval", "1", "--hyperparams", *SHORT],
+    ]
+    # OffOnDQN's two DQN extensions through --hyperparams: double Q-learning and a dueling network
+    commands["double_dueling"] = [
+        *["sb3_offon.train", "--algo", "offon_lambda_choice", "--env", "CartPole-v1", "-n", str(N_STEPS), *COMMON],
+        *["--eval-freq", "-1", "--hyperparams", *SHORT, "double_q:True"],
+        "policy_kwargs:dict(dueling=True, net_arch=[32, 32])",
+    ]
+    # A MinAtar game with its bundled settings (the MinAtar network through the YAML's policy_kwargs string)
+    commands["minatar"] = [
+        *["sb3_offon.train", "--algo", "offon_lambda_choice", "--env", "MinAtar/Breakout-v0", "-n", str(N_STEPS), *COMMON],
+        *["--eval-freq", "-1", "--hyperparams", "learning_starts:100"],
     ]
     # Tuning into a shared Optuna storage (a journal file here; any machine that sees the file, or an RDB URL, can
     # join), into a study another worker already added a trial to: the distributed tuning path
@@ -204,6 +217,24 @@ def test_goal_bonus_task_logs_goal_count(runs: tuple[Path, dict]) -> None:
         rows = list(csv.DictReader(file))
     # -1 each step, and the goal flag in the monitor CSV
     assert [(float(row["r"]), int(row["l"]), row["goal_reached"]) for row in rows] == [(-200.0, 200, "False")] * 2
+
+
+def test_double_q_and_dueling_from_the_command_line(runs: tuple[Path, dict]) -> None:
+    folder, results = runs
+    check(results["double_dueling"])
+    model = OffOnDQN.load(folder / "logs" / "offon_lambda_choice" / "CartPole-v1_1" / "CartPole-v1.zip", device="cpu")
+    assert model.double_q is True and model._n_updates > 0
+    assert model.policy.dueling is True and model.policy.net_arch == [32, 32]
+    assert isinstance(model.q_net.q_net, DuelingHead) and isinstance(model.q_net_target.q_net, DuelingHead)
+
+
+def test_minatar_game_trains_with_its_bundled_settings(runs: tuple[Path, dict]) -> None:
+    folder, results = runs
+    check(results["minatar"])
+    run = folder / "logs" / "offon_lambda_choice" / "MinAtar-Breakout-v0_1"
+    model = OffOnDQN.load(run / "MinAtar-Breakout-v0.zip", device="cpu")
+    assert isinstance(model.q_net.features_extractor, MinAtarCNN) and model._n_updates > 0
+    assert isinstance(model.policy.optimizer, th.optim.RMSprop) and model.exploration_final_eps == 0.1
 
 
 def test_optimize_shares_one_study(runs: tuple[Path, dict]) -> None:

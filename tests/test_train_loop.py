@@ -171,8 +171,16 @@ def read_backs_of_one_train_call(algo, gradient_steps: int, counts: dict, **kwar
 
 @pytest.mark.parametrize(
     "options",
-    [MIXED, {**MIXED, "mc_mixing": "max"}, {**MIXED, "sarsa_target": "expected"}, {**PAPER_TARGETS, "n_steps": 3}, {}],
-    ids=["sample", "max", "expected-sarsa", "paper-3-step", "lambda-defaults"],
+    [
+        MIXED,
+        {**MIXED, "mc_mixing": "max"},
+        {**MIXED, "sarsa_target": "expected"},
+        {**PAPER_TARGETS, "n_steps": 3},
+        {},
+        {**MIXED, "double_q": True},
+        {"double_q": True},
+    ],
+    ids=["sample", "max", "expected-sarsa", "paper-3-step", "lambda-defaults", "sample-double-q", "lambda-double-q"],
 )
 def test_read_backs_do_not_grow_with_gradient_steps(count_read_backs, options):
     few = read_backs_of_one_train_call(OffOnDQN, 4, count_read_backs, **options)

@@ -41,6 +41,7 @@ class CoinFlipTargetsMixin:
     _steps_per_chunk: Callable[[int], int]
     _to_device: Callable[[np.ndarray], th.Tensor]
     _loss_fn: Callable[[], Callable[[th.Tensor, th.Tensor], th.Tensor]]
+    _bootstrap: Callable[[Any], tuple[th.Tensor, th.Tensor, th.Tensor]]
 
     def _train_on_coin_flip_targets(self, gradient_steps: int, batch_size: int) -> None:
         """
@@ -147,8 +148,7 @@ class CoinFlipTargetsMixin:
         bound_active = None
         # For n-step replay, discount factor is gamma**n_steps (when no early termination)
         discounts = replay_data.discounts if replay_data.discounts is not None else self.gamma
-        next_q_values_all = self.q_net_target(replay_data.next_observations)
-        next_q_values, greedy_actions = next_q_values_all.max(dim=1)
+        next_q_values_all, greedy_actions, next_q_values = self._bootstrap(replay_data.next_observations)
         next_q_values = next_q_values.reshape(-1, 1)
         if use_sarsa is not None and np.count_nonzero(use_sarsa):
             next_q_values = self._sarsa_next_values(replay_data, next_q_values_all, next_q_values, greedy_actions, use_sarsa)
@@ -175,7 +175,7 @@ class CoinFlipTargetsMixin:
         greedy_actions: th.Tensor,
         use_sarsa: np.ndarray,
     ) -> th.Tensor:
-        """The values of the next states: Sarsa's where ``use_sarsa``, max_a Q_target(s', a) elsewhere."""
+        """The values of the next states: Sarsa's where ``use_sarsa``, Q-learning's (``max_next_q_values``) elsewhere."""
         use_sarsa_tensor = self._to_device(use_sarsa)
         if self.sarsa_target == "expected":
             # Expectation under the behaviour policy: epsilon-greedy on the online network
@@ -184,8 +184,9 @@ class CoinFlipTargetsMixin:
             expected = self.exploration_rate * next_q_values_all.mean(dim=1, keepdim=True)
             expected = expected + (1.0 - self.exploration_rate) * greedy_values
             return th.where(use_sarsa_tensor, expected, max_next_q_values)
-        # One gather, on the device: at the recorded next action a' for Sarsa, at the target network's greedy action
-        # elsewhere (which reads back exactly the max; a' is -1 there where unknown, and not used)
+        # One gather, on the device: at the recorded next action a' for Sarsa, at the bootstrap action elsewhere (the
+        # target network's greedy action, which reads back exactly the max, or the online network's with double Q;
+        # a' is -1 there where unknown, and not used)
         bootstrap_actions = th.where(use_sarsa_tensor, replay_data.next_actions, greedy_actions.reshape(-1, 1))
         return th.gather(next_q_values_all, dim=1, index=bootstrap_actions)
 

@@ -63,6 +63,7 @@ class LambdaTrainingMixin:
     _observation_bytes: Callable[[], int]
     _to_device: Callable[[np.ndarray], th.Tensor]
     _loss_fn: Callable[[], Callable[[th.Tensor, th.Tensor], th.Tensor]]
+    _bootstrap: Callable[[Any], tuple[th.Tensor, th.Tensor, th.Tensor]]
 
     def _train_on_lambda_returns(self, gradient_steps: int, batch_size: int) -> None:
         """
@@ -165,8 +166,9 @@ class LambdaTrainingMixin:
 
     def _target_values_and_actions(self, observations: np.ndarray | dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         """
-        max_a Q_target(s, a) and its argmax for a batch of (normalised) observations in the buffer's layout, in chunks
-        of :meth:`_lambda_forward_rows` rows, read back to the host once.
+        V(s) and the greedy action for a batch of (normalised) observations in the buffer's layout, in chunks of
+        :meth:`_lambda_forward_rows` rows, read back to the host once: max_a Q_target(s, a) and its argmax, or, with
+        ``double_q``, Q_target(s, a*) and a* = argmax_a Q(s, a) of the online network (its pass on the same chunk).
         """
         first = next(iter(observations.values())) if isinstance(observations, dict) else observations
         n_observations = len(first)
@@ -175,8 +177,7 @@ class LambdaTrainingMixin:
         with th.no_grad():
             for start in range(0, n_observations, rows_per_chunk):
                 rows = slice(start, start + rows_per_chunk)
-                q_values = self.q_net_target(obs_as_tensor(rows_of(observations, rows), self.device))
-                chunk_values, chunk_actions = q_values.max(dim=1)
+                _, chunk_actions, chunk_values = self._bootstrap(obs_as_tensor(rows_of(observations, rows), self.device))
                 values.append(chunk_values)
                 actions.append(chunk_actions)
         if not values:

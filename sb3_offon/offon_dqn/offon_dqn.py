@@ -47,6 +47,7 @@ OFFON_PARAMETERS = (
     "loss",
     "lambda_block_size",
     "lambda_refresh_interval",
+    "double_q",
 )
 
 
@@ -141,6 +142,23 @@ class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, ChunkedMinibatchesMixi
     - Logged: ``train/lambda`` and ``train/trace_cut_fraction``, the share of the continuations whose trace weight
       c_{t+1} was below 1 (non-greedy next actions with delta2 > 0), both of the refresh in use.
 
+    ``double_q=True`` is double Q-learning (van Hasselt, Guez & Silver, "Deep Reinforcement Learning with Double
+    Q-learning", AAAI 2016) in every target that bootstraps: V(s) = Q_target(s, argmax_a Q(s, a)), the action picked by
+    the online network and valued by the target network, replaces max_a Q_target(s, a) in the Q-learning target of the
+    coin-flip modes (and in Sarsa's where the next action is unknown), in the bootstrap of a truncated episode's return,
+    and in the lambda-returns, where the trace-cut test also compares the recorded next action with that online argmax
+    (the greedy policy being learnt). With ``n_steps`` > 1 it applies at the n-th next state. Expected Sarsa is
+    unchanged (it does not maximise). Cost: one forward pass of the online network beside each pass of the target
+    network, on the same batch. The online network behind an argmax is the one of the moment the target is computed:
+
+    - coin-flip modes: at the start of each chunk of gradient steps (one chunk holds all of a training call's steps
+      unless their observations pass 64 MiB, see :mod:`sb3_offon.offon_dqn.chunks`), so at most ``gradient_steps``
+      - 1 steps older than the step that trains on it, as the target network's values are (SB3's own double-DQN-less
+      loop would take it at each step);
+    - a truncated episode's bootstrap: when the episode ends, never refreshed (as with ``double_q=False``);
+    - ``mc_mixing="lambda"``: at the refresh, so as old as the cached return, at most ``target_update_interval`` env
+      steps (or ``lambda_refresh_interval``), while the target network's values there are current.
+
     :param policy: The policy model to use (MlpPolicy, CnnPolicy, ...)
     :param env: The environment to learn from (if registered in Gym, can be str)
     :param learning_rate: The learning rate, it can be a function of the current progress remaining (from 1 to 0)
@@ -200,6 +218,8 @@ class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, ChunkedMinibatchesMixi
     :param lambda_refresh_interval: ``mc_mixing="lambda"``: recompute the cached lambda-returns every this many env
         steps; None (default): whenever the target network is updated (every ``target_update_interval`` steps). Set it
         with soft target updates every step (``tau`` < 1), where refreshing at each update would cost most
+    :param double_q: double Q-learning in every bootstrap (see above): the online network picks the action, the target
+        network values it. Default False (DQN's max over the target network)
     :param stats_window_size: Window size for the rollout logging, specifying the number of episodes to average
         the reported success rate, mean episode length, and mean reward over
     :param tensorboard_log: the log location for tensorboard (if None, no logging)
@@ -253,6 +273,7 @@ class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, ChunkedMinibatchesMixi
         loss: str = "huber",
         lambda_block_size: int = 100,
         lambda_refresh_interval: int | None = None,
+        double_q: bool = False,
         stats_window_size: int = 100,
         tensorboard_log: str | None = None,
         policy_kwargs: dict[str, Any] | None = None,
@@ -303,6 +324,7 @@ class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, ChunkedMinibatchesMixi
         self.loss = loss
         self.lambda_block_size = lambda_block_size
         self.lambda_refresh_interval = lambda_refresh_interval
+        self.double_q = double_q
         # The Off-On arguments are checked by _setup_model (which load() also runs); the buffer's discounting here, on
         # the caller's arguments only
         self._check_buffer_discounting()
@@ -335,6 +357,9 @@ class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, ChunkedMinibatchesMixi
             # isinstance first: an array or other object would make ``in`` ambiguous or raise something else
             if not isinstance(value, str) or value not in options:
                 raise ValueError(f"`{name}` must be one of {options}, got {value!r}")
+        # getattr: models saved before double_q existed load without it (and train as before, without double Q)
+        if not isinstance(getattr(self, "double_q", False), (bool, np.bool_)):
+            raise ValueError(f"`double_q` must be True or False, got {self.double_q!r}")
         for name, allow_none in (("lambda_block_size", False), ("lambda_refresh_interval", True)):
             value = getattr(self, name)
             if allow_none and value is None:
@@ -406,6 +431,11 @@ class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, ChunkedMinibatchesMixi
             bootstraps = self.mc_truncation == "bootstrap"
             self.replay_buffer.truncation_value_fn = self._target_state_values if bootstraps else None
             self.replay_buffer.drop_truncated_returns = self.mc_truncation == "drop"
+        elif getattr(self, "double_q", False):
+            raise ValueError(
+                f"`double_q` needs an Off-On replay buffer: with {type(self.replay_buffer).__name__}, OffOnDQN trains as "
+                "SB3's DQN does, whose targets have no double Q-learning"
+            )
         elif not getattr(self, "_warned_plain_buffer", False):
             self._warned_plain_buffer = True
             warnings.warn(
@@ -428,15 +458,34 @@ class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, ChunkedMinibatchesMixi
         if truncate_last_traj and isinstance(self.replay_buffer, OffOnBufferMixin):
             self.replay_buffer.end_open_episodes()
 
+    def _bootstrap(self, observations: th.Tensor | dict[str, th.Tensor]) -> tuple[th.Tensor, th.Tensor, th.Tensor]:
+        """
+        What a target bootstraps from at a batch of states s (on the device, under ``no_grad`` at the caller's).
+
+        :param observations: the states, as the networks take them
+        :return: Q_target(s, .) of every action; the bootstrap action a*, argmax_a Q_target(s, a) (DQN) or, with
+            ``double_q``, argmax_a Q(s, a) of the online network (double Q-learning); and V(s) = Q_target(s, a*)
+        """
+        q_values_all = self.q_net_target(observations)
+        if not self.double_q:
+            values, actions = q_values_all.max(dim=1)
+            return q_values_all, actions, values
+        # The online network picks, the target network evaluates (van Hasselt et al. 2016)
+        actions = self.q_net(observations).argmax(dim=1)
+        return q_values_all, actions, th.gather(q_values_all, dim=1, index=actions.reshape(-1, 1)).reshape(-1)
+
     def _target_state_values(self, observations: np.ndarray | dict[str, np.ndarray]) -> np.ndarray:
-        """max_a Q_target(s, a) of a batch of unnormalised observations (the bootstrap of truncated episodes)."""
+        """
+        V(s) of a batch of unnormalised observations (the bootstrap of truncated episodes): max_a Q_target(s, a), or
+        Q_target(s, argmax_a Q(s, a)) with ``double_q``.
+        """
         if self._vec_normalize_env is not None:
             observations = self._vec_normalize_env.normalize_obs(observations)
         # Observations come in the replay buffer's layout (a Discrete observation is stored as shape (1,)): convert
         # them as the buffer converts its samples, onto the networks' device
         obs_tensor = obs_as_tensor(observations, self.policy.device)
         with th.no_grad():
-            values = self.q_net_target(obs_tensor).max(dim=1).values.cpu().numpy()
+            values = self._bootstrap(obs_tensor)[2].cpu().numpy()
         # Q is in the units of the (maybe normalised) rewards it learnt from, the buffer's returns in raw units
         return values * reward_scale(self._vec_normalize_env)
 

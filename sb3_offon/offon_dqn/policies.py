@@ -1,4 +1,223 @@
-# OffOnDQN learns the same Q-network as DQN: only the regression targets differ.
-from stable_baselines3.dqn.policies import CnnPolicy, DQNPolicy, MlpPolicy, MultiInputPolicy, QNetwork
+"""
+OffOnDQN's policies: SB3's DQN policies, with dueling networks as an option (``policy_kwargs=dict(dueling=True)``).
 
-__all__ = ["CnnPolicy", "DQNPolicy", "MlpPolicy", "MultiInputPolicy", "QNetwork"]
+With ``dueling=False``, the default, a policy builds exactly SB3's ``QNetwork`` (same modules, same parameters, drawn
+in the same order): OffOnDQN learns the same Q-network as DQN, and only the regression targets differ.
+"""
+
+from typing import Any
+
+import torch as th
+from gymnasium import spaces
+from stable_baselines3.common.torch_layers import (
+    BaseFeaturesExtractor,
+    CombinedExtractor,
+    FlattenExtractor,
+    NatureCNN,
+    create_mlp,
+)
+from stable_baselines3.common.type_aliases import Schedule
+from stable_baselines3.dqn.policies import DQNPolicy, QNetwork
+from torch import nn
+
+
+class DuelingHead(nn.Module):
+    """
+    Q(s, a) = V(s) + A(s, a) - mean_a' A(s, a') from the features of s: a value stream and an advantage stream, each an
+    MLP with the hidden layers ``net_arch``.
+
+    Paper: Wang et al., "Dueling Network Architectures for Deep Reinforcement Learning", ICML 2016.
+    https://arxiv.org/abs/1511.06581 (equation 9: the mean advantage is subtracted, which keeps V and A identifiable)
+
+    :param features_dim: size of the features
+    :param n_actions: number of actions
+    :param net_arch: hidden layers of each stream
+    :param activation_fn: activation after each hidden layer
+    """
+
+    def __init__(self, features_dim: int, n_actions: int, net_arch: list[int], activation_fn: type[nn.Module]) -> None:
+        super().__init__()
+        self.value_stream = nn.Sequential(*create_mlp(features_dim, 1, net_arch, activation_fn))
+        self.advantage_stream = nn.Sequential(*create_mlp(features_dim, n_actions, net_arch, activation_fn))
+
+    def forward(self, features: th.Tensor) -> th.Tensor:
+        advantages = self.advantage_stream(features)
+        return self.value_stream(features) + advantages - advantages.mean(dim=1, keepdim=True)
+
+
+class DuelingQNetwork(QNetwork):
+    """
+    SB3's ``QNetwork`` whose head (``q_net``) is a :class:`DuelingHead`; the features extractor is unchanged.
+
+    :param observation_space: Observation space
+    :param action_space: Action space
+    :param features_extractor: the features extractor (shared by both streams)
+    :param features_dim: size of its features
+    :param net_arch: hidden layers of each stream
+    :param activation_fn: Activation function
+    :param normalize_images: Whether to normalize images or not, dividing by 255.0 (True by default)
+    """
+
+    def __init__(
+        self,
+        observation_space: spaces.Space,
+        action_space: spaces.Discrete,
+        features_extractor: BaseFeaturesExtractor,
+        features_dim: int,
+        net_arch: list[int] | None = None,
+        activation_fn: type[nn.Module] = nn.ReLU,
+        normalize_images: bool = True,
+    ) -> None:
+        super().__init__(
+            observation_space, action_space, features_extractor, features_dim, net_arch, activation_fn, normalize_images
+        )
+        # Replaces the single stream that QNetwork builds; forward() and _predict() read q_net as they do in SB3
+        self.q_net = DuelingHead(  # type: ignore[assignment]
+            self.features_dim, int(self.action_space.n), self.net_arch, self.activation_fn
+        )
+
+
+class OffOnDQNPolicy(DQNPolicy):
+    """
+    SB3's ``DQNPolicy`` (the online and target Q-networks, the optimizer) with dueling networks as an option.
+
+    :param observation_space: Observation space
+    :param action_space: Action space
+    :param lr_schedule: Learning rate schedule (could be constant)
+    :param net_arch: The hidden layers after the features extractor (of each stream, with ``dueling=True``)
+    :param activation_fn: Activation function
+    :param features_extractor_class: Features extractor to use.
+    :param features_extractor_kwargs: Keyword arguments to pass to the features extractor.
+    :param normalize_images: Whether to normalize images or not, dividing by 255.0 (True by default)
+    :param optimizer_class: The optimizer to use, ``th.optim.Adam`` by default
+    :param optimizer_kwargs: Additional keyword arguments, excluding the learning rate, to pass to the optimizer
+    :param dueling: a value stream and an advantage stream after the features extractor (:class:`DuelingHead`), in
+        the online and the target network; False (default): SB3's single stream. A dueling head has the parameters of
+        two streams: about twice the head's compute per forward pass
+    """
+
+    def __init__(
+        self,
+        observation_space: spaces.Space,
+        action_space: spaces.Discrete,
+        lr_schedule: Schedule,
+        net_arch: list[int] | None = None,
+        activation_fn: type[nn.Module] = nn.ReLU,
+        features_extractor_class: type[BaseFeaturesExtractor] = FlattenExtractor,
+        features_extractor_kwargs: dict[str, Any] | None = None,
+        normalize_images: bool = True,
+        optimizer_class: type[th.optim.Optimizer] = th.optim.Adam,
+        optimizer_kwargs: dict[str, Any] | None = None,
+        dueling: bool = False,
+    ) -> None:
+        if not isinstance(dueling, bool):
+            raise ValueError(f"`dueling` must be True or False, got {dueling!r}")
+        # Set before DQNPolicy's constructor, which builds the networks through make_q_net
+        self.dueling = dueling
+        super().__init__(
+            observation_space,
+            action_space,
+            lr_schedule,
+            net_arch,
+            activation_fn,
+            features_extractor_class,
+            features_extractor_kwargs,
+            normalize_images,
+            optimizer_class,
+            optimizer_kwargs,
+        )
+
+    def make_q_net(self) -> QNetwork:
+        if not self.dueling:
+            return super().make_q_net()
+        # As DQNPolicy.make_q_net: each network gets a features extractor of its own
+        net_args = self._update_features_extractor(self.net_args, features_extractor=None)
+        return DuelingQNetwork(**net_args).to(self.device)
+
+    def _get_constructor_parameters(self) -> dict[str, Any]:
+        return {**super()._get_constructor_parameters(), "dueling": self.dueling}
+
+
+MlpPolicy = OffOnDQNPolicy
+
+
+class CnnPolicy(OffOnDQNPolicy):
+    """
+    :class:`OffOnDQNPolicy` for images, with SB3's ``NatureCNN`` as default features extractor (as SB3's DQN
+    ``CnnPolicy``). The parameters are :class:`OffOnDQNPolicy`'s.
+    """
+
+    def __init__(
+        self,
+        observation_space: spaces.Space,
+        action_space: spaces.Discrete,
+        lr_schedule: Schedule,
+        net_arch: list[int] | None = None,
+        activation_fn: type[nn.Module] = nn.ReLU,
+        features_extractor_class: type[BaseFeaturesExtractor] = NatureCNN,
+        features_extractor_kwargs: dict[str, Any] | None = None,
+        normalize_images: bool = True,
+        optimizer_class: type[th.optim.Optimizer] = th.optim.Adam,
+        optimizer_kwargs: dict[str, Any] | None = None,
+        dueling: bool = False,
+    ) -> None:
+        super().__init__(
+            observation_space,
+            action_space,
+            lr_schedule,
+            net_arch,
+            activation_fn,
+            features_extractor_class,
+            features_extractor_kwargs,
+            normalize_images,
+            optimizer_class,
+            optimizer_kwargs,
+            dueling,
+        )
+
+
+class MultiInputPolicy(OffOnDQNPolicy):
+    """
+    :class:`OffOnDQNPolicy` for dict observations, with SB3's ``CombinedExtractor`` as default features extractor (as
+    SB3's DQN ``MultiInputPolicy``). The parameters are :class:`OffOnDQNPolicy`'s.
+    """
+
+    def __init__(
+        self,
+        observation_space: spaces.Dict,
+        action_space: spaces.Discrete,
+        lr_schedule: Schedule,
+        net_arch: list[int] | None = None,
+        activation_fn: type[nn.Module] = nn.ReLU,
+        features_extractor_class: type[BaseFeaturesExtractor] = CombinedExtractor,
+        features_extractor_kwargs: dict[str, Any] | None = None,
+        normalize_images: bool = True,
+        optimizer_class: type[th.optim.Optimizer] = th.optim.Adam,
+        optimizer_kwargs: dict[str, Any] | None = None,
+        dueling: bool = False,
+    ) -> None:
+        super().__init__(
+            observation_space,
+            action_space,
+            lr_schedule,
+            net_arch,
+            activation_fn,
+            features_extractor_class,
+            features_extractor_kwargs,
+            normalize_images,
+            optimizer_class,
+            optimizer_kwargs,
+            dueling,
+        )
+
+
+__all__ = [
+    "CnnPolicy",
+    "DQNPolicy",
+    "DuelingHead",
+    "DuelingQNetwork",
+    "MlpPolicy",
+    "MultiInputPolicy",
+    "OffOnDQNPolicy",
+    "QNetwork",
+]
