@@ -9,6 +9,7 @@ Example::
     python -m sb3_offon.enjoy --algo offon_dqn --env CartPole-v1 -f logs -n 2000 --no-render
 """
 
+import sys
 from typing import Any
 
 from stable_baselines3.common.base_class import BaseAlgorithm
@@ -52,10 +53,13 @@ def main() -> None:
         import rl_zoo3.enjoy as zoo_enjoy
 
         from sb3_offon.cli_args import use_tolerant_store_dict
+        from sb3_offon.train import one_thread_by_default
         from sb3_offon.zoo import ALGOS, register
     register()
     # ``--env-kwargs key:word``: unquoted strings, as for training
     use_tolerant_store_dict()
+    # One torch thread unless --num-threads says otherwise, as for training
+    sys.argv[1:] = one_thread_by_default(sys.argv[1:])
     # A copy for enjoy alone: training keeps the real classes
     zoo_enjoy.ALGOS = {**zoo_enjoy.ALGOS, **{name: ReplayLoader(cls) for name, cls in ALGOS.items()}}  # type: ignore[assignment,misc]
     zoo_enjoy.enjoy()

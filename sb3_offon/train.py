@@ -30,6 +30,8 @@ from types import ModuleType, SimpleNamespace
 from sb3_offon.extras import zoo_required
 
 PACKAGE_DIR = Path(__file__).resolve().parent
+# The torch threads of a run when the command line does not say: one (see one_thread_by_default)
+DEFAULT_NUM_THREADS = 1
 # OffOnDQN's checks of its own arguments word their errors as "`name` must be ...": the argument's name in backticks
 ARGUMENT_ERROR = re.compile(r"^`(?P<name>\w+)` must be ")
 
@@ -61,8 +63,27 @@ def help_description(algos: dict[str, type]) -> str:
             "Off-On parameters (mc_initial_prob, mc_mixing, sarsa_target, ...; set them with --hyperparams",
             "name:value): the algorithm page of the docs, docs/offon_dqn.md in the source, or",
             "python -c 'import sb3_offon; help(sb3_offon.OffOnDQN)'. Command line and files: docs/cli.md.",
+            f"Threads: {DEFAULT_NUM_THREADS} torch thread unless --num-threads says otherwise (-1: torch's default, one",
+            "per core). DQN's small networks train fastest on one thread, several times slower with threads that",
+            "compete with other processes for the cores: docs/speed.md.",
         ]
     )
+
+
+def one_thread_by_default(argv: list[str]) -> list[str]:
+    """
+    ``argv`` with ``--num-threads 1`` added when it has no ``--num-threads`` of its own.
+
+    The zoo leaves torch at its default, one intra-op thread per core. For the small networks of DQN that is slower than
+    one thread, and far slower when other processes use the cores (the threads wait for each other): measured in
+    docs/speed.md. ``--num-threads -1`` keeps the zoo's behaviour.
+
+    :param argv: the command line's arguments (without the program name)
+    :return: the arguments to run with
+    """
+    if any(argument == "--num-threads" or argument.startswith("--num-threads=") for argument in argv):
+        return list(argv)
+    return [*argv, "--num-threads", str(DEFAULT_NUM_THREADS)]
 
 
 class DescribedArgumentParser(argparse.ArgumentParser):
@@ -130,6 +151,7 @@ def main() -> None:
     describe_help(zoo_train, ALGOS)
     # ``--hyperparams mc_mixing:convex``: unquoted strings (the zoo alone needs "mc_mixing:'convex'")
     use_tolerant_store_dict()
+    sys.argv[1:] = one_thread_by_default(sys.argv[1:])
     with argument_errors_in_one_line():
         zoo_train.train()
 

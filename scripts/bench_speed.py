@@ -1,10 +1,12 @@
 """
 Speed benchmark: environment steps per second of OffOnDQN against SB3's DQN at identical hyperparameters.
 
-Both algorithms get the same hyperparameter dict (rl-zoo's tuned DQN settings for the env) and the same seed;
-OffOnDQN keeps its constructor defaults for the Off-On parameters (the paper's delta schedules), or with ``--mode
-lambda`` takes ``offon_lambda``'s target settings (``mc_mixing="lambda"``, lambda 0.9, Watkins's cuts). The baseline is
-SB3's DQN, or with ``--baseline dqn_nstep`` SB3's DQN with ``n_steps=10`` (n-step returns).
+Both algorithms get the same hyperparameter dict (rl-zoo's tuned DQN settings for the env; the MinAtar paper's for
+MinAtar/Breakout-v0) and the same seed. OffOnDQN's targets (``--mode``): ``defaults``, its constructor's (lambda-returns,
+lambda 0.9, Peng's Q(lambda)); ``paper``, the paper's coin flips (``PAPER_TARGETS``); ``lambda``, ``offon_lambda``'s
+(lambda 0.9, Watkins's cuts); ``double_q``, the defaults with double Q-learning. The baseline (``--baseline``, the "DQN"
+columns): SB3's DQN, SB3's DQN with ``n_steps=10`` (``dqn_nstep``), or OffOnDQN with its defaults (``offon_defaults``,
+to measure what an option of OffOnDQN costs).
 
 The two runs of a pair take turns in one process: each learn() runs in a thread of its own, and they hand a baton
 to each other every ``--switch-every`` env steps (from a callback), so only one of them computes at any time. A
@@ -23,6 +25,8 @@ Usage:
     python scripts/bench_speed.py --env CartPole-v1 --device cuda --output results/speed/cartpole_cuda.json
     python scripts/bench_speed.py --env AtariShaped --device cuda --timesteps 5000 --output results/speed/atari_cuda.json
     python scripts/bench_speed.py --env LunarLander-v3 --mode lambda --baseline dqn_nstep --repeats 5
+    python scripts/bench_speed.py --env MinAtar/Breakout-v0 --mode defaults --train-freq 1 --timesteps 15000 --prefill 5000
+    python scripts/bench_speed.py --env LunarLander-v3 --mode double_q --baseline offon_defaults
 
 ``--env AtariShaped`` is an Atari-shaped task made up on the spot (4 stacked 84x84 uint8 frames, episodes of 200 steps
 that end by termination, CnnPolicy, the zoo's Atari DQN settings with a smaller buffer), so that CNNs can be measured,
@@ -51,7 +55,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.envs import FakeImageEnv
 
 import sb3_offon
-from sb3_offon import OffOnDQN
+from sb3_offon import PAPER_TARGETS, MinAtarCNN, OffOnDQN
 from sb3_offon.offon_dqn.offon_dqn import OFFON_PARAMETERS
 
 # rl-baselines3-zoo's tuned DQN hyperparameters (hyperparams/dqn.yml), minus n_timesteps and the policy name
@@ -98,16 +102,49 @@ ZOO_HYPERPARAMS[ATARI_SHAPED] = dict(
     exploration_fraction=0.1,
     exploration_final_eps=0.01,
 )
-# --mode lambda: offon_lambda's target settings (sb3_offon/hyperparams/offon_lambda.yml)
+# The MinAtar paper's DQN settings, as in the bundled YAML files (sb3_offon/hyperparams/dqn.yml), with its network
+MINATAR_BREAKOUT = "MinAtar/Breakout-v0"
+ZOO_HYPERPARAMS[MINATAR_BREAKOUT] = dict(
+    learning_rate=2.5e-4,
+    batch_size=32,
+    buffer_size=100_000,
+    learning_starts=5000,
+    gamma=0.99,
+    target_update_interval=1000,
+    train_freq=4,
+    gradient_steps=1,
+    exploration_fraction=0.1,
+    exploration_final_eps=0.1,
+    policy_kwargs=dict(
+        features_extractor_class=MinAtarCNN,
+        net_arch=[],
+        optimizer_class=th.optim.RMSprop,
+        optimizer_kwargs=dict(alpha=0.95, eps=0.01, centered=True),
+    ),
+)
+# --mode: OffOnDQN's targets. "paper" is the paper's coin flips (the constructor's defaults until the lambda-returns
+# became them: results written before then with mode "paper" measured those same targets)
 LAMBDA_TARGETS = dict(
     mc_mixing="lambda", mc_initial_prob=0.9, mc_final_prob=0.9, qlearning_initial_prob=1.0, qlearning_final_prob=1.0
 )
-MODES = {"paper": {}, "lambda": LAMBDA_TARGETS}
-# --baseline dqn_nstep: SB3's n-step DQN as in the head-to-heads (hyperparams/dqn_nstep.yml uses n = 10 on every task)
-BASELINES = {"dqn": {}, "dqn_nstep": dict(n_steps=10)}
-BASELINE_NAMES = {"dqn": "SB3's DQN", "dqn_nstep": "SB3's DQN with n_steps=10 (n-step DQN)"}
-ZOO_TIMESTEPS = {"CartPole-v1": 50_000, "LunarLander-v3": 100_000, ATARI_SHAPED: 10_000_000}
+MODES = {"defaults": {}, "paper": dict(PAPER_TARGETS), "lambda": LAMBDA_TARGETS, "double_q": dict(double_q=True)}
+# --baseline: the class and arguments of the "DQN" runs. dqn_nstep: SB3's n-step DQN as in the classic-control
+# head-to-heads (hyperparams/dqn_nstep.yml uses n = 10 on those tasks)
+BASELINES: dict[str, tuple[type[DQN], dict]] = {
+    "dqn": (DQN, {}),
+    "dqn_nstep": (DQN, dict(n_steps=10)),
+    "offon_defaults": (OffOnDQN, {}),
+}
+BASELINE_NAMES = {
+    "dqn": "SB3's DQN",
+    "dqn_nstep": "SB3's DQN with n_steps=10 (n-step DQN)",
+    "offon_defaults": "OffOnDQN with its defaults",
+}
+ZOO_TIMESTEPS = {"CartPole-v1": 50_000, "LunarLander-v3": 100_000, ATARI_SHAPED: 10_000_000, MINATAR_BREAKOUT: 1_000_000}
 POLICIES = {"CartPole-v1": "MlpPolicy", "LunarLander-v3": "MlpPolicy", ATARI_SHAPED: "CnnPolicy"}
+POLICIES[MINATAR_BREAKOUT] = "CnnPolicy"
+# The two runs of a pair by role: "DQN" is the baseline (whatever --baseline names), "OffOnDQN" the candidate
+ROLES = ("DQN", "OffOnDQN")
 
 
 class AtariShapedEnv(FakeImageEnv):
@@ -131,7 +168,7 @@ class AtariShapedEnv(FakeImageEnv):
 def make_env(env_id: str) -> gym.Env:
     if env_id == ATARI_SHAPED:
         return AtariShapedEnv()
-    return gym.make(env_id)
+    return gym.make(env_id)  # MinAtar's ids are registered by ``import sb3_offon``
 
 
 def parse_args() -> argparse.Namespace:
@@ -165,9 +202,15 @@ def parse_args() -> argparse.Namespace:
         help="env steps each model collects, untimed and without training, before its timed run (a fuller buffer: "
         "the lambda mode's refresh reaches its steady size only once the buffer holds more than a refresh computes)",
     )
-    parser.add_argument("--mode", choices=sorted(MODES), default="paper", help="OffOnDQN's targets (default: paper)")
+    parser.add_argument("--mode", choices=sorted(MODES), default="defaults", help="OffOnDQN's targets (default: defaults)")
     parser.add_argument(
-        "--baseline", choices=sorted(BASELINES), default="dqn", help="SB3's DQN, or its n-step DQN (n = 10) (default: dqn)"
+        "--baseline",
+        choices=sorted(BASELINES),
+        default="dqn",
+        help="SB3's DQN, its n-step DQN (n = 10), or OffOnDQN with its defaults (default: dqn)",
+    )
+    parser.add_argument(
+        "--train-freq", type=int, default=None, help="env steps between gradient steps, for both runs (default: the settings')"
     )
     parser.add_argument("--output", type=str, default=None, help="optional JSON path (a markdown table is written next to it)")
     return parser.parse_args()
@@ -261,7 +304,7 @@ def build(
 
 
 def run_pair(
-    order: tuple[type[DQN], type[DQN]],
+    order: tuple[str, str],
     env_id: str,
     hyperparams: dict,
     timesteps: int,
@@ -270,18 +313,22 @@ def run_pair(
     device: str = "cpu",
     extra_kwargs: dict[str, dict] | None = None,
     prefill: int = 0,
+    classes: dict[str, type[DQN]] | None = None,
 ) -> dict:
     """
-    Build both models (untimed), then run their learn() calls taking turns; one result dict per algorithm.
+    Build both models (untimed), then run their learn() calls taking turns; one result dict per role.
 
-    :param extra_kwargs: per class name (``DQN``, ``OffOnDQN``), constructor arguments of that run only
+    :param order: the roles (``"DQN"``, the baseline, and ``"OffOnDQN"``), the one that starts first
+    :param extra_kwargs: per role, constructor arguments of that run only
     :param prefill: env steps each model collects first, untimed and without training (its timed run continues then)
+    :param classes: per role, the algorithm (default: SB3's DQN and OffOnDQN)
     """
-    names = tuple(algo.__name__ for algo in order)
+    names = order
+    classes = {"DQN": DQN, "OffOnDQN": OffOnDQN, **(classes or {})}
     baton = Baton(*names)
     models, callbacks = {}, {}
-    for name, algo in zip(names, order, strict=True):
-        models[name] = build(algo, env_id, hyperparams, seed, device, (extra_kwargs or {}).get(name))
+    for name in names:
+        models[name] = build(classes[name], env_id, hyperparams, seed, device, (extra_kwargs or {}).get(name))
         if prefill > 0:
             model = models[name][0]
             learning_starts, model.learning_starts = model.learning_starts, prefill
@@ -316,6 +363,7 @@ def run_pair(
         episode_lengths = model.env.env_method("get_episode_lengths")[0]  # from SB3's Monitor wrapper
         runs[name] = {
             "algo": name,
+            "class": type(model).__name__,
             "env_steps": steps,
             "gradient_steps": model._n_updates,
             "learn_seconds": wall,
@@ -355,6 +403,7 @@ def markdown_table(result: dict) -> str:
         f"{result['switch_every']} env steps, "
         f"seed {result['seed']}, {result['policy']} on {result['device']} ({result['device_name']}), "
         f"baseline {result.get('baseline', 'dqn')}, OffOnDQN targets {result.get('mode', 'paper')}, "
+        f"a gradient step every {result['hyperparams']['train_freq']} env steps, "
         f"prefill {result.get('prefill', 0)} untimed steps, "
         f"{result['threads']} torch thread(s), load average "
         f"{result['loadavg_start'][0]:.2f} at start / {result['loadavg_end'][0]:.2f} at end ({result['cpu_count']} CPUs), "
@@ -408,9 +457,13 @@ def markdown_table(result: dict) -> str:
 if __name__ == "__main__":
     args = parse_args()
     th.set_num_threads(args.threads)
-    hyperparams = ZOO_HYPERPARAMS[args.env]  # one dict, passed as it is to both algorithms
+    hyperparams = dict(ZOO_HYPERPARAMS[args.env])  # one dict, passed as it is to both algorithms
+    if args.train_freq is not None:
+        hyperparams["train_freq"] = args.train_freq
     # The baseline's and OffOnDQN's own arguments (the "DQN" columns are the baseline's, n-step DQN's with dqn_nstep)
-    extra_kwargs = {"DQN": BASELINES[args.baseline], "OffOnDQN": MODES[args.mode]}
+    baseline_class, baseline_kwargs = BASELINES[args.baseline]
+    classes = {"DQN": baseline_class}
+    extra_kwargs = {"DQN": baseline_kwargs, "OffOnDQN": MODES[args.mode]}
     make_env(args.env).close()  # fail early if the env (Box2D for LunarLander) is missing
     if args.device == "cuda" and not th.cuda.is_available():
         raise SystemExit("--device cuda: no CUDA device")
@@ -428,7 +481,8 @@ if __name__ == "__main__":
         "policy": POLICIES[args.env],
         "hyperparams": hyperparams,
         "baseline": args.baseline,
-        "baseline_kwargs": BASELINES[args.baseline],
+        "baseline_class": baseline_class.__name__,
+        "baseline_kwargs": baseline_kwargs,
         "mode": args.mode,
         "prefill": args.prefill,
         "cpu_count": os.cpu_count(),
@@ -452,12 +506,12 @@ if __name__ == "__main__":
         f"{args.env}: {args.repeats} pairs of {args.timesteps} env steps, seed {args.seed}, {args.threads} thread(s), "
         f"device {args.device} ({result['device_name']})"
     )
-    print(f"hyperparams: {hyperparams}; baseline {args.baseline} {BASELINES[args.baseline]}, OffOnDQN {MODES[args.mode]}")
+    print(f"hyperparams: {hyperparams}; baseline {args.baseline} {baseline_kwargs}, OffOnDQN {MODES[args.mode]}")
     print(f"load average at start: {result['loadavg_start']} ({result['cpu_count']} CPUs)")
 
     if args.warmup_timesteps > 0:
         run_pair(
-            (DQN, OffOnDQN),
+            ROLES,
             args.env,
             hyperparams,
             args.warmup_timesteps,
@@ -465,12 +519,13 @@ if __name__ == "__main__":
             args.switch_every,
             args.device,
             extra_kwargs,
+            classes=classes,
         )
         print(f"warm-up done ({args.warmup_timesteps} steps of each, untimed)")
 
     for repeat in range(args.repeats):
-        order = (DQN, OffOnDQN) if repeat % 2 == 0 else (OffOnDQN, DQN)
-        pair = {"repeat": repeat, "order": f"{order[0].__name__} starts"}
+        order = ROLES if repeat % 2 == 0 else ROLES[::-1]
+        pair = {"repeat": repeat, "order": f"{order[0]} starts"}
         pair.update(
             run_pair(
                 order,
@@ -482,6 +537,7 @@ if __name__ == "__main__":
                 args.device,
                 extra_kwargs,
                 args.prefill,
+                classes,
             )
         )
         for run in (pair["DQN"], pair["OffOnDQN"]):
@@ -522,6 +578,7 @@ if __name__ == "__main__":
     if args.output is not None:
         output = Path(args.output)
         output.parent.mkdir(parents=True, exist_ok=True)
-        output.write_text(json.dumps(result, indent=2) + "\n")
+        # Classes in the settings (MinAtar's network and optimizer) are written by name
+        output.write_text(json.dumps(result, indent=2, default=lambda value: getattr(value, "__name__", repr(value))) + "\n")
         output.with_suffix(".md").write_text(table + "\n")
         print(f"\nwritten: {output} and {output.with_suffix('.md')}")

@@ -26,11 +26,16 @@ def parameters_digest(model) -> str:
 
 
 @pytest.mark.parametrize(
-    "extra_kwargs",
-    [None, {"DQN": {"n_steps": 10}, "OffOnDQN": {"mc_mixing": "lambda", "mc_initial_prob": 0.9, "mc_final_prob": 0.9}}],
-    ids=["dqn-paper", "nstep-lambda"],
+    "extra_kwargs, classes",
+    [
+        (None, None),
+        ({"DQN": {"n_steps": 10}, "OffOnDQN": {"mc_mixing": "sample", "mc_initial_prob": 0.9, "mc_final_prob": 0.9}}, None),
+        # An option of OffOnDQN against its defaults: both runs are OffOnDQN
+        ({"OffOnDQN": {"double_q": True}}, {"DQN": OffOnDQN}),
+    ],
+    ids=["dqn-defaults", "nstep-coin-flips", "offon-double-q"],
 )
-def test_runs_taking_turns_learn_what_they_learn_alone(monkeypatch, extra_kwargs):
+def test_runs_taking_turns_learn_what_they_learn_alone(monkeypatch, extra_kwargs, classes):
     bench_speed = load_script("bench_speed")
     # Keep each pair's models, to compare them with runs made alone
     built = []
@@ -44,16 +49,18 @@ def test_runs_taking_turns_learn_what_they_learn_alone(monkeypatch, extra_kwargs
     monkeypatch.setattr(bench_speed, "build", keep)
     # Hand over every 50 steps: a dozen turns each, in the middle of rollouts and of training bursts
     runs = bench_speed.run_pair(
-        (DQN, OffOnDQN), "CartPole-v1", HYPERPARAMS, TIMESTEPS, seed=3, every=50, extra_kwargs=extra_kwargs
+        ("DQN", "OffOnDQN"), "CartPole-v1", HYPERPARAMS, TIMESTEPS, 3, 50, extra_kwargs=extra_kwargs, classes=classes
     )
 
-    for model in built:
-        own = (extra_kwargs or {}).get(type(model).__name__, {})
+    assert [type(model) for model in built] == [(classes or {}).get("DQN", DQN), OffOnDQN]
+    for role, model in zip(("DQN", "OffOnDQN"), built, strict=True):
+        own = (extra_kwargs or {}).get(role, {})
         alone = type(model)("MlpPolicy", "CartPole-v1", seed=3, device="cpu", **HYPERPARAMS, **own).learn(TIMESTEPS)
         for key, value in own.items():
             assert getattr(model, key) == value, key
-        assert parameters_digest(model) == parameters_digest(alone), type(model).__name__
-        run = runs[type(model).__name__]
+        assert parameters_digest(model) == parameters_digest(alone), role
+        run = runs[role]
+        assert run["class"] == type(model).__name__
         assert run["env_steps"] == alone.num_timesteps
         assert run["episodes"] == len(alone.env.env_method("get_episode_lengths")[0])
         # Each run is timed only while it holds the baton: both times are parts of the pair's elapsed time

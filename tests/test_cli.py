@@ -97,6 +97,12 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, subp
         *["--eval-freq", "-1", "--hyperparams", *SHORT, "double_q:True"],
         "policy_kwargs:dict(dueling=True, net_arch=[32, 32])",
     ]
+    # No --num-threads: one torch thread all the same
+    commands["default_threads"] = [
+        *["sb3_offon.train", "--algo", "dqn", "--env", "CartPole-v1", "-n", "200", "--seed", "0", "-f", "logs_threads"],
+        # --verbose 2: the zoo then says the number of threads it sets
+        *["--eval-freq", "-1", "--verbose", "2", "--hyperparams", *SHORT],
+    ]
     # A MinAtar game with its bundled settings (the MinAtar network through the YAML's policy_kwargs string)
     commands["minatar"] = [
         *["sb3_offon.train", "--algo", "offon_lambda_choice", "--env", "MinAtar/Breakout-v0", "-n", str(N_STEPS), *COMMON],
@@ -226,6 +232,11 @@ def test_double_q_and_dueling_from_the_command_line(runs: tuple[Path, dict]) -> 
     assert model.double_q is True and model._n_updates > 0
     assert model.policy.dueling is True and model.policy.net_arch == [32, 32]
     assert isinstance(model.q_net.q_net, DuelingHead) and isinstance(model.q_net_target.q_net, DuelingHead)
+
+
+def test_one_torch_thread_without_num_threads(runs: tuple[Path, dict]) -> None:
+    _, results = runs
+    assert "Setting torch.num_threads to 1" in check(results["default_threads"])
 
 
 def test_minatar_game_trains_with_its_bundled_settings(runs: tuple[Path, dict]) -> None:

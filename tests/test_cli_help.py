@@ -8,7 +8,7 @@ import pytest
 from stable_baselines3 import DQN
 
 from sb3_offon import OffOnDQN
-from sb3_offon.train import argument_errors_in_one_line, help_description
+from sb3_offon.train import argument_errors_in_one_line, help_description, one_thread_by_default
 from sb3_offon.zoo import ALGOS
 
 TIMEOUT = 300
@@ -70,3 +70,16 @@ def test_help_and_bad_hyperparameter_on_the_command_line(tmp_path: Path) -> None
     assert len(lines) == 1, err
     assert "`mc_mixing` must be one of ('sample', 'convex'" in lines[0] and "got 'foo'" in lines[0]
     assert "Traceback" not in err
+
+
+@pytest.mark.parametrize(
+    "argv, expected",
+    [
+        (["--algo", "dqn"], ["--algo", "dqn", "--num-threads", "1"]),
+        (["--algo", "dqn", "--num-threads", "4"], ["--algo", "dqn", "--num-threads", "4"]),
+        (["--num-threads=-1", "--algo", "dqn"], ["--num-threads=-1", "--algo", "dqn"]),
+    ],
+)
+def test_one_thread_unless_the_command_line_says(argv: list[str], expected: list[str]) -> None:
+    assert one_thread_by_default(argv) == expected
+    assert "--num-threads" in help_description(ALGOS)
