@@ -1,0 +1,360 @@
+"""
+Judge and report a study stated as a file (``benchmarks/<study>.yml``): its tables, figures and verdict, from its runs.
+
+A study file names what was run (``algos``, ``envs``, ``seeds``, the ``name`` of its folder under the results root),
+how a run is scored (``final_evaluations``: the evaluations averaged into the final return; the AUC is the mean
+evaluation return over training), the fixed ``normalisation`` of each env's scores (``[low, high]``), the statistics
+(``confidence``, ``bootstrap_reps``), and the ``rule``: criteria about its ``candidate``, each of one kind:
+
+- ``final_not_below`` (``reference``): on every env, the upper bound of the interval of the candidate's mean final
+  return minus the reference's is at least 0 (two-sample percentile bootstrap, the seeds of each side resampled apart);
+- ``iqm_above`` (``measure``: ``auc`` or ``final``; ``reference``): the candidate's IQM of normalised scores over every
+  env and seed is above the reference's (point estimates; rliable's stratified bootstrap gives their intervals).
+
+The verdict is "holds" when every criterion holds, "does not hold" otherwise, and "incomplete" while runs are missing
+(the tables then show what there is). ``also_against`` lists the other algorithms the same criteria are reported for.
+A ``setup_check`` block (``algo``, ``seeds``, ``name``) is judged with ``--setup-check``: the algorithm's final
+evaluation episodes against a random policy's return (``--random``, from ``scripts/random_policy.py``).
+
+Usage::
+
+    python scripts/study.py benchmarks/minatar.yml                # tables, figures and verdict into results/minatar/
+    python scripts/study.py benchmarks/minatar.yml --setup-check --random results/minatar/random_policy.json
+"""
+
+import argparse
+import json
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+# run_stats.py sits next to this script: importable however the script is started
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import matplotlib.pyplot as plt
+import numpy as np
+import yaml
+from rliable import metrics
+from run_stats import (
+    Run,
+    evaluation_curves,
+    interval_estimates,
+    label,
+    load_runs,
+    mean_ci,
+    mean_difference,
+    run_scores,
+    two_sample_ci,
+)
+from scipy import stats
+
+COLORS = {"dqn": "tab:blue", "dqn_nstep": "tab:orange", "qrdqn": "tab:green", "offon_lambda_choice": "tab:red"}
+
+
+@dataclass
+class Study:
+    """A study file, read."""
+
+    path: Path
+    name: str
+    question: str
+    algos: list[str]
+    envs: list[str]
+    seeds: list[int]
+    candidate: str
+    rule: list[dict]
+    normalisation: dict[str, tuple[float, float]]
+    final_evaluations: int = 3
+    reps_difference: int = 10_000
+    reps_iqm: int = 2_000
+    also_against: list[str] = field(default_factory=list)
+    setup_check: dict | None = None
+    stated: str = ""
+
+    @classmethod
+    def read(cls, path: Path) -> "Study":
+        data = yaml.safe_load(path.read_text())
+        reps = data.get("bootstrap_reps", {})
+        return cls(
+            path=path,
+            name=data["name"],
+            question=" ".join(data["question"].split()),
+            algos=list(data["algos"]),
+            envs=list(data["envs"]),
+            seeds=[int(seed) for seed in data["seeds"]],
+            candidate=data["candidate"],
+            rule=list(data["rule"]),
+            normalisation={env: (float(low), float(high)) for env, (low, high) in data["normalisation"].items()},
+            final_evaluations=int(data.get("final_evaluations", 3)),
+            reps_difference=int(reps.get("difference", 10_000)),
+            reps_iqm=int(reps.get("iqm", 2_000)),
+            also_against=list(data.get("also_against", [])),
+            setup_check=data.get("setup_check"),
+            stated=str(data.get("stated", "")),
+        )
+
+
+# ----------------------------------------------------------------------------------------------------------------------
+# Scores
+# ----------------------------------------------------------------------------------------------------------------------
+def study_runs(study: Study, root: Path) -> tuple[dict[str, dict[str, list[Run]]], dict[str, dict[str, dict]]]:
+    """``runs[env][algo]`` and ``scores[env][algo]`` (final, auc: one per run, by seed) of the study's finished runs."""
+    folder = root / study.name
+    loaded = load_runs(folder) if folder.is_dir() else {}
+    runs: dict[str, dict[str, list[Run]]] = {}
+    scores: dict[str, dict[str, dict]] = {}
+    for env in study.envs:
+        for algo in study.algos:
+            kept = [run for run in loaded.get(env, {}).get(algo, []) if run.seed in study.seeds]
+            if kept:
+                grid, curves = evaluation_curves(kept)
+                runs.setdefault(env, {})[algo] = kept
+                scores.setdefault(env, {})[algo] = run_scores(kept, grid, curves, study.final_evaluations, None)
+    return runs, scores
+
+
+def missing_runs(study: Study, runs: dict) -> int:
+    expected = len(study.algos) * len(study.envs) * len(study.seeds)
+    return expected - sum(len(by_algo.get(algo, [])) for by_algo in runs.values() for algo in study.algos)
+
+
+def normalised(study: Study, runs: dict, scores: dict, algo: str, measure: str) -> np.ndarray | None:
+    """(seeds, envs) of normalised scores, envs sorted (the order every caller gives rliable); None if a run is missing."""
+    envs = sorted(study.envs)
+    if any(len(runs.get(env, {}).get(algo, [])) != len(study.seeds) for env in envs):
+        return None
+    columns = []
+    for env in envs:
+        low, high = study.normalisation[env]
+        columns.append((scores[env][algo][measure] - low) / (high - low))
+    return np.array(columns).T
+
+
+def iqm_intervals(study: Study, runs: dict, scores: dict, measure: str) -> dict[str, tuple[float, float, float]]:
+    """Per algorithm with every run in: the IQM of normalised ``measure`` over envs and seeds, with its interval."""
+    matrices = {algo: normalised(study, runs, scores, algo, measure) for algo in study.algos}
+    complete = {algo: matrix for algo, matrix in matrices.items() if matrix is not None}
+    if not complete:
+        return {}
+    point, interval = interval_estimates(complete, lambda s: np.array([metrics.aggregate_iqm(s)]), study.reps_iqm)
+    return {algo: (float(point[algo][0]), float(interval[algo][0, 0]), float(interval[algo][1, 0])) for algo in complete}
+
+
+def final_difference(study: Study, scores: dict, env: str, algo: str, reference: str) -> tuple[float, float, float] | None:
+    """The mean final return of ``algo`` minus ``reference``'s on ``env``, with its interval (None: a side is missing)."""
+    by_algo = scores.get(env, {})
+    if algo not in by_algo or reference not in by_algo:
+        return None
+    return two_sample_ci(by_algo[algo]["final"], by_algo[reference]["final"], mean_difference, study.reps_difference)
+
+
+# ----------------------------------------------------------------------------------------------------------------------
+# The rule
+# ----------------------------------------------------------------------------------------------------------------------
+def judge_criterion(study: Study, runs: dict, scores: dict, criterion: dict, algo: str) -> tuple[bool | None, str]:
+    """Whether one criterion holds for ``algo`` (None: runs missing), and a line that says why."""
+    kind, reference = criterion["kind"], criterion["reference"]
+    if kind == "final_not_below":
+        below = []
+        for env in study.envs:
+            difference = final_difference(study, scores, env, algo, reference)
+            if difference is None or len(runs[env][algo]) != len(study.seeds) or len(runs[env][reference]) != len(study.seeds):
+                return None, f"final return not below {label(reference)}'s on any env: runs missing on {env}"
+            if difference[2] < 0:
+                below.append(f"{env} ({difference[0]:+.2f} [{difference[1]:+.2f}, {difference[2]:+.2f}])")
+        text = f"final return not below {label(reference)}'s on any env by the interval of the difference"
+        return not below, f"{text}: {'below on ' + ', '.join(below) if below else 'holds on every env'}"
+    if kind == "iqm_above":
+        measure = criterion["measure"]
+        iqms = iqm_intervals(study, runs, scores, measure)
+        name = f"IQM of normalised {measure.upper() if measure == 'auc' else measure}"
+        if algo not in iqms or reference not in iqms:
+            return None, f"{name} above {label(reference)}'s: runs missing"
+        ours, theirs = iqms[algo], iqms[reference]
+        return ours[0] > theirs[0], (
+            f"{name} above {label(reference)}'s: {ours[0]:.3f} [{ours[1]:.3f}, {ours[2]:.3f}] against "
+            f"{theirs[0]:.3f} [{theirs[1]:.3f}, {theirs[2]:.3f}]"
+        )
+    raise ValueError(f"unknown criterion kind {kind!r} in the rule")
+
+
+def verdict(study: Study, runs: dict, scores: dict) -> tuple[str, list[str]]:
+    """The study's verdict ("holds", "does not hold", "incomplete") and a line per criterion."""
+    results = [judge_criterion(study, runs, scores, criterion, study.candidate) for criterion in study.rule]
+    lines = [f"{'holds' if ok else 'does not hold' if ok is not None else 'open'}: {text}" for ok, text in results]
+    missing = missing_runs(study, runs)
+    if missing or any(ok is None for ok, _ in results):
+        return f"incomplete ({missing} runs missing)", lines
+    return ("holds" if all(ok for ok, _ in results) else "does not hold"), lines
+
+
+# ----------------------------------------------------------------------------------------------------------------------
+# Report: tables and figures
+# ----------------------------------------------------------------------------------------------------------------------
+def interval(values: tuple[float, float, float], spec: str = ".2f") -> str:
+    point, low, high = values
+    return f"{point:{spec}} (one run)" if np.isnan(low) else f"{point:{spec}} [{low:{spec}}, {high:{spec}}]"
+
+
+def per_env_table(study: Study, runs: dict, scores: dict, measure: str) -> list[str]:
+    header = " | ".join(label(algo) for algo in study.algos)
+    lines = [f"| env | {header} |", "|---|" + "---:|" * len(study.algos)]
+    for env in study.envs:
+        cells = []
+        for algo in study.algos:
+            values = scores.get(env, {}).get(algo, {}).get(measure)
+            if values is None:
+                cells.append("-")
+                continue
+            point, low, high = (float(part[0]) for part in mean_ci(values, study.reps_iqm))
+            text = interval((point, low, high) if len(values) > 1 else (point, np.nan, np.nan))
+            cells.append(f"{text} ({len(values)})")
+        lines.append(f"| {env} | {' | '.join(cells)} |")
+    return lines
+
+
+def difference_table(study: Study, scores: dict) -> list[str]:
+    others = [algo for algo in study.algos if algo != "dqn"]
+    lines = [f"| env | {' | '.join(f'{label(algo)} - DQN' for algo in others)} |", "|---|" + "---:|" * len(others)]
+    for env in study.envs:
+        cells = []
+        for algo in others:
+            difference = final_difference(study, scores, env, algo, "dqn")
+            cells.append("-" if difference is None else interval(difference, "+.2f"))
+        lines.append(f"| {env} | {' | '.join(cells)} |")
+    return lines
+
+
+def report(study: Study, root: Path, out: Path) -> str:
+    """Write ``table.md``, the learning curves and the aggregate figure into ``out``; return the verdict."""
+    runs, scores = study_runs(study, root)
+    out.mkdir(parents=True, exist_ok=True)
+    decision, lines = verdict(study, runs, scores)
+    n_runs = sum(len(by_algo.get(algo, [])) for by_algo in runs.values() for algo in study.algos)
+    text = [
+        f"<!-- Generated by scripts/study.py {study.path.as_posix()}: do not edit by hand. -->",
+        f"# {study.name}: {n_runs} of {len(study.algos) * len(study.envs) * len(study.seeds)} runs",
+        "",
+        f"Seeds {', '.join(map(str, study.seeds))}; 95% intervals; in brackets after each cell, the runs it averages.",
+        "",
+        f"**Verdict: {decision}.** The rule, stated in `{study.path.as_posix()}` on {study.stated}, for "
+        f"{label(study.candidate)}:",
+        "",
+        *[f"- {line}" for line in lines],
+    ]
+    for other in study.also_against:
+        text.append(f"- reported, not part of the rule, against {label(other)}:")
+        for criterion in study.rule:
+            ok, line = judge_criterion(study, runs, scores, {**criterion, "reference": other}, study.candidate)
+            text.append(f"  - {'holds' if ok else 'does not hold' if ok is not None else 'open'}: {line}")
+    text += ["", "## Final return (mean of the last evaluations)", "", *per_env_table(study, runs, scores, "final")]
+    text += ["", "## AUC (mean evaluation return over training)", "", *per_env_table(study, runs, scores, "auc")]
+    text += ["", "## Final return minus DQN's", "", *difference_table(study, scores)]
+    for measure in ("auc", "final"):
+        iqms = iqm_intervals(study, runs, scores, measure)
+        title = "AUC" if measure == "auc" else "final return"
+        text += ["", f"## IQM of normalised {title} over the envs (algorithms with every run in)", ""]
+        text += ["| algorithm | IQM |", "|---|---:|", *[f"| {label(algo)} | {interval(iqms[algo], '.3f')} |" for algo in iqms]]
+    low_high = ", ".join(f"{env} [{low:g}, {high:g}]" for env, (low, high) in study.normalisation.items())
+    text += ["", f"Normalisation (score - low) / (high - low), fixed before the runs: {low_high}."]
+    (out / "table.md").write_text("\n".join(text) + "\n")
+    plot_curves(study, runs, out)
+    plot_aggregate(study, runs, scores, out)
+    return decision
+
+
+def plot_curves(study: Study, runs: dict, out: Path) -> None:
+    envs = [env for env in study.envs if env in runs]
+    if not envs:
+        return
+    fig, axes = plt.subplots(1, len(envs), figsize=(4.2 * len(envs), 3.6), squeeze=False)
+    for ax, env in zip(axes[0], envs, strict=True):
+        for algo, kept in runs[env].items():
+            grid, curves = evaluation_curves(kept)
+            mean, low, high = mean_ci(curves, study.reps_iqm)
+            ax.plot(grid, mean, color=COLORS.get(algo), label=f"{label(algo)} ({len(kept)})")
+            ax.fill_between(grid, low, high, color=COLORS.get(algo), alpha=0.2, linewidth=0)
+        ax.set(title=env, xlabel="Environment steps", ylabel="Evaluation return")
+        ax.grid(alpha=0.3)
+    axes[0][0].legend(fontsize=8)
+    fig.suptitle(f"{study.name}: mean evaluation return over seeds, 95% bootstrap bands (runs in brackets)", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(out / "curves.png", dpi=100)
+    plt.close(fig)
+
+
+def plot_aggregate(study: Study, runs: dict, scores: dict, out: Path) -> None:
+    panels = [(measure, iqm_intervals(study, runs, scores, measure)) for measure in ("auc", "final")]
+    if not any(iqms for _, iqms in panels):
+        return
+    fig, axes = plt.subplots(1, 2, figsize=(9, 0.6 * len(study.algos) + 1.6))
+    for ax, (measure, iqms) in zip(axes, panels, strict=True):
+        for row, (algo, (point, low, high)) in enumerate(iqms.items()):
+            ax.barh(row, high - low, left=low, color=COLORS.get(algo), alpha=0.6, height=0.6)
+            ax.plot([point, point], [row - 0.3, row + 0.3], color="black", linewidth=2)
+        ax.set_yticks(range(len(iqms)), [label(algo) for algo in iqms])
+        ax.set_title(f"IQM of normalised {'AUC' if measure == 'auc' else 'final return'}", fontsize=10)
+        ax.grid(axis="x", alpha=0.3)
+    fig.suptitle(f"{study.name}: across {len(study.envs)} envs (95% stratified bootstrap CIs)", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(out / "aggregate.png", dpi=100)
+    plt.close(fig)
+
+
+# ----------------------------------------------------------------------------------------------------------------------
+# Setup check
+# ----------------------------------------------------------------------------------------------------------------------
+def setup_check(study: Study, root: Path, random_scores: dict) -> tuple[bool, list[str]]:
+    """The setup check's algorithm above a random policy on every env: the interval of its final episodes' mean return
+    (percentile bootstrap over episodes) above the random policy's interval. Returns whether it passed, a line per env."""
+    check = study.setup_check or {}
+    lines, passed = [], True
+    for env in study.envs:
+        for seed in check.get("seeds", []):
+            folder = root / check["name"] / check["algo"] / f"{env.replace('/', '-')}_{seed}"
+            try:
+                with np.load(folder / "evaluations.npz") as data:
+                    episodes = data["results"][-study.final_evaluations :].ravel()
+            except OSError:
+                lines.append(f"{env} seed {seed}: not run")
+                passed = False
+                continue
+            result = stats.bootstrap((episodes,), np.mean, n_resamples=study.reps_difference, method="percentile", rng=0)
+            low, high = result.confidence_interval.low, result.confidence_interval.high
+            random = random_scores[env]
+            above = bool(low > random["high"])
+            passed &= above
+            lines.append(
+                f"{env} seed {seed}: {label(check['algo'])} {episodes.mean():.2f} [{low:.2f}, {high:.2f}] "
+                f"({len(episodes)} episodes) against random {random['mean']:.2f} [{random['low']:.2f}, {random['high']:.2f}]: "
+                f"{'above' if above else 'NOT above'}"
+            )
+    return passed, lines
+
+
+def main(argv: list[str] | None = None) -> str:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("study", type=Path, help="the study file (benchmarks/<study>.yml)")
+    parser.add_argument("--root", type=Path, default=Path("results/raw"), help="results root (default: results/raw)")
+    parser.add_argument("--out", type=Path, default=None, help="report folder (default: results/<study name>)")
+    parser.add_argument("--setup-check", action="store_true", help="judge the study's setup check instead")
+    parser.add_argument("--random", type=Path, default=None, help="random policy's scores (scripts/random_policy.py)")
+    args = parser.parse_args(argv)
+    study = Study.read(args.study)
+    if args.setup_check:
+        if args.random is None:
+            parser.error("--setup-check needs --random")
+        passed, lines = setup_check(study, args.root, json.loads(args.random.read_text())["results"])
+        print("\n".join(lines))
+        print(f"Setup check: {'passed' if passed else 'FAILED'}")
+        return "passed" if passed else "failed"
+    decision = report(study, args.root, args.out or Path("results") / study.name)
+    print(f"{study.name}: {decision}")
+    return decision
+
+
+if __name__ == "__main__":
+    # A failed setup check is an error (a script that starts a grid after it stops there); a verdict is a result
+    sys.exit(1 if main() == "failed" else 0)
