@@ -18,7 +18,8 @@ import torch as th
 from stable_baselines3 import DQN
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.envs import FakeImageEnv, SimpleMultiObsEnv
-from stable_baselines3.dqn.policies import QNetwork
+from stable_baselines3.common.torch_layers import FlattenExtractor
+from stable_baselines3.dqn.policies import DQNPolicy, QNetwork
 from test_lambda_nstep import reference_nstep_lambda_returns
 from test_lambda_returns import assert_matches_reference, reference_lambda_returns
 from torch import nn
@@ -290,3 +291,46 @@ def test_bad_double_q_names_the_parameter(name: str, value) -> None:
 def test_bad_dueling_names_the_parameter() -> None:
     with pytest.raises(ValueError, match="`dueling` must be True or False"):
         OffOnDQN("MlpPolicy", "CartPole-v1", policy_kwargs=dict(dueling="yes"), device="cpu")
+
+
+# --- the policy's mode switch and parameter list (what SB3 calls at every env step) --------------------------------------
+
+
+class CountingExtractor(FlattenExtractor):
+    """A features extractor that overrides ``train``: the policy must then switch modes SB3's way, through it."""
+
+    calls = 0
+
+    def train(self, mode: bool = True):
+        CountingExtractor.calls += 1
+        return super().train(mode)
+
+
+@pytest.mark.parametrize("dueling", [False, True])
+def test_training_mode_flags_are_sb3s(dueling: bool) -> None:
+    model = OffOnDQN("MlpPolicy", "CartPole-v1", policy_kwargs=dict(dueling=dueling, net_arch=[8]), device="cpu")
+    reference = OffOnDQN("MlpPolicy", "CartPole-v1", policy_kwargs=dict(dueling=dueling, net_arch=[8]), device="cpu")
+    for mode in (True, False, True):
+        model.policy.set_training_mode(mode)
+        DQNPolicy.set_training_mode(reference.policy, mode)  # SB3's own way, through Module.train
+        flags = [module.training for module in model.policy.modules()]
+        assert flags == [module.training for module in reference.policy.modules()]
+        assert all(module.training == mode for module in model.q_net.modules()) and model.policy.training == mode
+        assert not any(module.training for module in model.q_net_target.modules())
+
+
+def test_a_module_that_overrides_train_is_switched_through_it() -> None:
+    model = OffOnDQN("MlpPolicy", "CartPole-v1", policy_kwargs=dict(features_extractor_class=CountingExtractor), device="cpu")
+    before = CountingExtractor.calls
+    model.policy.set_training_mode(True)
+    assert CountingExtractor.calls == before + 1 and model.q_net.features_extractor.training
+
+
+def test_parameter_list_is_the_policys_and_follows_a_reload(tmp_path: Path) -> None:
+    model = OffOnDQN("MlpPolicy", "CartPole-v1", policy_kwargs=dict(net_arch=[8]), device="cpu")
+    assert model._parameter_list() == list(model.policy.parameters())
+    assert model._parameter_list() is model._parameter_list()  # listed once
+    model.save(tmp_path / "model")
+    loaded = OffOnDQN.load(tmp_path / "model", device="cpu")
+    assert loaded._parameter_list() == list(loaded.policy.parameters())
+    assert all(a is not b for a, b in zip(loaded._parameter_list(), model._parameter_list(), strict=True))

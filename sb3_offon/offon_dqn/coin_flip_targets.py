@@ -42,6 +42,7 @@ class CoinFlipTargetsMixin:
     _to_device: Callable[[np.ndarray], th.Tensor]
     _loss_fn: Callable[[], Callable[[th.Tensor, th.Tensor], th.Tensor]]
     _bootstrap: Callable[[Any], tuple[th.Tensor, th.Tensor, th.Tensor]]
+    _parameter_list: Callable[[], list[th.nn.Parameter]]
 
     def _train_on_coin_flip_targets(self, gradient_steps: int, batch_size: int) -> None:
         """
@@ -57,8 +58,8 @@ class CoinFlipTargetsMixin:
         mc_drawn, sarsa_drawn = uniforms[0] < self.mc_prob, uniforms[1] >= self.qlearning_prob
         # Expected Sarsa's behaviour policy is the online network, which each step changes: its targets are per step
         targets_per_step = self.sarsa_target == "expected" and self.qlearning_prob < 1.0
-        # Listed once per call rather than walking the policy's modules at each step as SB3's DQN does (same clipping)
-        parameters = list(self.policy.parameters())
+        # Listed once (not by walking the policy's modules at each step, as SB3's DQN does): the same clipping
+        parameters = self._parameter_list()
         losses, q_taken, mc_returns, bound_active = [], [], [], []
         n_mc_targets = n_sarsa_targets = 0
         steps_per_chunk = self._steps_per_chunk(batch_size)

@@ -101,6 +101,7 @@ class LambdaReturnCache:
     whole_buffer: bool = False
     order: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     cursor: int = 0
+    _newest_added_at: int | None = None
 
     def __len__(self) -> int:
         return len(self.returns)
@@ -122,23 +123,33 @@ class LambdaReturnCache:
 
         :return: entry indices, or None when too few of the cached transitions are still stored (refresh then)
         """
-        live = buffer.holds_transition(self.added_at)
-        n_live = int(np.count_nonzero(live))
-        if n_live == 0:
+        # The newest cached transition is the last one the buffer overwrites: if it is gone, they all are. Checked on
+        # it alone, and below on the entries drawn, so that a call costs O(n_samples), not O(cache) (a cache holds a
+        # refresh's worth of transitions, 32,000 with one gradient step of 32 per env step and a target update every
+        # 1,000); the whole cache is checked only when a new pass over it begins
+        if len(self.added_at) == 0 or not buffer.holds_transition(np.array(self.newest_added_at())):
             return None
         drawn: list[np.ndarray] = []
         n_drawn = 0
         while n_drawn < n_samples:
             if self.cursor >= len(self.order):
                 # A new pass over the live entries, in a new random order
-                self.order = np.flatnonzero(live)[np.random.permutation(n_live)]
+                live = np.flatnonzero(buffer.holds_transition(self.added_at))
+                self.order = live[np.random.permutation(len(live))]
                 self.cursor = 0
             taken = self.order[self.cursor : self.cursor + n_samples - n_drawn]
             self.cursor += len(taken)
-            taken = taken[live[taken]]  # entries of the current pass may have been overwritten since it began
+            # Entries of the current pass may have been overwritten since it began
+            taken = taken[buffer.holds_transition(self.added_at[taken])]
             drawn.append(taken)
             n_drawn += len(taken)
         return np.concatenate(drawn)
+
+    def newest_added_at(self) -> int:
+        """The add index of the newest cached transition (computed once: the cache does not change)."""
+        if self._newest_added_at is None:
+            self._newest_added_at = int(self.added_at.max())
+        return self._newest_added_at
 
 
 def wants_whole_buffer(n_envs: int, first: int, n_stored: int, n_wanted: int) -> bool:

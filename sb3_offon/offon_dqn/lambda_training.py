@@ -64,6 +64,7 @@ class LambdaTrainingMixin:
     _to_device: Callable[[np.ndarray], th.Tensor]
     _loss_fn: Callable[[], Callable[[th.Tensor, th.Tensor], th.Tensor]]
     _bootstrap: Callable[[Any], tuple[th.Tensor, th.Tensor, th.Tensor]]
+    _parameter_list: Callable[[], list[th.nn.Parameter]]
 
     def _train_on_lambda_returns(self, gradient_steps: int, batch_size: int) -> None:
         """
@@ -84,7 +85,7 @@ class LambdaTrainingMixin:
             cache = self._refreshed_lambda_cache(n_samples)
             entries = cache.draw(n_samples, self.replay_buffer)
             assert entries is not None
-        parameters = list(self.policy.parameters())
+        parameters = self._parameter_list()
         losses = []
         steps_per_chunk = self._steps_per_chunk(batch_size)
         for first_step in range(0, gradient_steps, steps_per_chunk):

@@ -25,7 +25,7 @@ from sb3_offon.offon_dqn.chunks import ChunkedMinibatchesMixin
 from sb3_offon.offon_dqn.coin_flip_targets import CoinFlipTargetsMixin
 from sb3_offon.offon_dqn.lambda_returns import LambdaReturnCache
 from sb3_offon.offon_dqn.lambda_training import LambdaTrainingMixin
-from sb3_offon.offon_dqn.policies import CnnPolicy, MlpPolicy, MultiInputPolicy
+from sb3_offon.offon_dqn.policies import CnnPolicy, MlpPolicy, MultiInputPolicy, OffOnDQNPolicy
 
 SelfOffOnDQN = TypeVar("SelfOffOnDQN", bound="OffOnDQN")
 
@@ -473,6 +473,12 @@ class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, ChunkedMinibatchesMixi
         # The online network picks, the target network evaluates (van Hasselt et al. 2016)
         actions = self.q_net(observations).argmax(dim=1)
         return q_values_all, actions, th.gather(q_values_all, dim=1, index=actions.reshape(-1, 1)).reshape(-1)
+
+    def _parameter_list(self) -> list[th.nn.Parameter]:
+        """The policy's parameters, whose gradients are clipped: listed once by an ``OffOnDQNPolicy``, else at each call."""
+        if isinstance(self.policy, OffOnDQNPolicy):
+            return self.policy.parameter_list()
+        return list(self.policy.parameters())
 
     def _target_state_values(self, observations: np.ndarray | dict[str, np.ndarray]) -> np.ndarray:
         """
