@@ -34,6 +34,8 @@ PACKAGE_DIR = Path(__file__).resolve().parent
 DEFAULT_NUM_THREADS = 1
 # OffOnDQN's checks of its own arguments word their errors as "`name` must be ...": the argument's name in backticks
 ARGUMENT_ERROR = re.compile(r"^`(?P<name>\w+)` must be ")
+# rl_zoo3.train's error for an env id that is not registered
+UNKNOWN_ENV = re.compile(r"^(?P<env>\S+) not found in gym registry")
 
 
 def prog() -> str:
@@ -42,15 +44,22 @@ def prog() -> str:
     return script if script.startswith("sb3-offon-train") else "python -m sb3_offon.train"
 
 
-def help_description(algos: dict[str, type]) -> str:
+def help_description(algos: dict[str, type], summaries: dict[str, str] | None = None) -> str:
     """
-    The paragraph that opens ``--help``: the ``--algo`` names this package adds, and where they are documented.
+    The paragraph that opens ``--help``: the ``--algo`` names this package adds, what each trains, and where they are
+    documented.
 
     :param algos: the names this package registers and their classes (:data:`sb3_offon.zoo.ALGOS`)
+    :param summaries: a line on what each name trains (:data:`sb3_offon.zoo.ALGO_SUMMARIES`)
     :return: the text, lines of at most 100 characters
     """
     width = max(len(name) for name in algos) + 2
-    rows = [f"  {name:<{width}}{algo.__module__.partition('.')[0]}.{algo.__name__}" for name, algo in algos.items()]
+    rows = []
+    for name, algo in algos.items():
+        summary = (summaries or {}).get(name)
+        rows.append(f"  {name:<{width}}{algo.__module__.partition('.')[0]}.{algo.__name__}")
+        if summary:
+            rows.append(f"  {'':<{width}}  {summary}")
     return "\n".join(
         [
             "rl-baselines3-zoo's train command, with the algorithms of sb3-offon added to its --algo choices:",
@@ -100,7 +109,7 @@ class DescribedArgumentParser(argparse.ArgumentParser):
         return f"{self.description_text}\n\n{super().format_help()}"
 
 
-def describe_help(module: ModuleType, algos: dict[str, type]) -> None:
+def describe_help(module: ModuleType, algos: dict[str, type], summaries: dict[str, str] | None = None) -> None:
     """
     Make ``module`` (``rl_zoo3.train``) build its parser with :class:`DescribedArgumentParser`.
 
@@ -109,14 +118,41 @@ def describe_help(module: ModuleType, algos: dict[str, type]) -> None:
 
     :param module: the zoo module whose parser gets the description
     :param algos: the names to list (read when this is called, so that every registered name appears)
+    :param summaries: a line on what each name trains
     """
-    parser_class = type("DescribedArgumentParser", (DescribedArgumentParser,), {"description_text": help_description(algos)})
+    description = help_description(algos, summaries)
+    parser_class = type("DescribedArgumentParser", (DescribedArgumentParser,), {"description_text": description})
     module.argparse = SimpleNamespace(**{**vars(argparse), "ArgumentParser": parser_class})  # type: ignore[attr-defined]
 
 
 def _raised_by_this_package(error: BaseException) -> bool:
     frames = traceback.extract_tb(error.__traceback__)
     return bool(frames) and Path(frames[-1].filename).resolve().is_relative_to(PACKAGE_DIR)
+
+
+@contextmanager
+def unknown_env_in_one_line() -> Iterator[None]:
+    """
+    Turn the zoo's error for an env id that no package registered into one line on stderr, with the closest registered
+    ids, and exit status 2 (the zoo raises a ``ValueError`` whose traceback ends in "you maybe meant ...").
+
+    :raises SystemExit: with status 2, after printing the line
+    """
+    try:
+        yield
+    except ValueError as error:
+        match = UNKNOWN_ENV.match(str(error))
+        if match is None:
+            raise
+        import difflib
+
+        import gymnasium as gym
+
+        env_id = match.group("env")
+        close = difflib.get_close_matches(env_id, list(gym.registry), n=3, cutoff=0.6)
+        hint = f"; close matches: {', '.join(close)}" if close else "; no registered id is close to it"
+        print(f"{prog()}: error: unknown environment '{env_id}'{hint}", file=sys.stderr)
+        raise SystemExit(2) from None
 
 
 @contextmanager
@@ -146,13 +182,13 @@ def main() -> None:
         import rl_zoo3.train as zoo_train
 
         from sb3_offon.cli_args import use_tolerant_store_dict
-        from sb3_offon.zoo import ALGOS, register
+        from sb3_offon.zoo import ALGO_SUMMARIES, ALGOS, register
     register()
-    describe_help(zoo_train, ALGOS)
+    describe_help(zoo_train, ALGOS, ALGO_SUMMARIES)
     # ``--hyperparams mc_mixing:convex``: unquoted strings (the zoo alone needs "mc_mixing:'convex'")
     use_tolerant_store_dict()
     sys.argv[1:] = one_thread_by_default(sys.argv[1:])
-    with argument_errors_in_one_line():
+    with argument_errors_in_one_line(), unknown_env_in_one_line():
         zoo_train.train()
 
 

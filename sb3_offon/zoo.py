@@ -55,6 +55,17 @@ ALGOS: dict[str, type[BaseAlgorithm]] = {
     "offon_lambda_choice": OffOnDQN,
 }
 
+# What each name trains, in a line (``--help`` lists them)
+ALGO_SUMMARIES: dict[str, str] = {
+    "offon_dqn": "the paper's coin-flip targets (PAPER_TARGETS)",
+    "dqn_mc": "the paper's ablation: Monte-Carlo or Q-learning targets, no Sarsa",
+    "dqn_sarsa": "the paper's ablation: Q-learning or Sarsa targets, no Monte-Carlo",
+    "dqn_nstep": "SB3's DQN with n-step returns (n in the YAML)",
+    "offon_choice": "coin flips as a search chose them: delta1 0.99 -> 0.01, no Sarsa",
+    "offon_lambda": "lambda-returns, lambda 0.9, Watkins's Q(lambda)",
+    "offon_lambda_choice": "OffOnDQN's defaults: lambda-returns, lambda 0.9, Peng's Q(lambda)",
+}
+
 
 def resolve_config(algo: str, config: str | None) -> str | None:
     """

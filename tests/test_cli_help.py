@@ -9,16 +9,23 @@ from stable_baselines3 import DQN
 
 from sb3_offon import OffOnDQN
 from sb3_offon.train import argument_errors_in_one_line, help_description, one_thread_by_default
-from sb3_offon.zoo import ALGOS
+from sb3_offon.zoo import ALGO_SUMMARIES, ALGOS
 
 TIMEOUT = 300
 
 
 def test_help_description_lists_every_registered_name() -> None:
     # Built from the dict at run time: a name added to ALGOS appears without touching the text
-    text = help_description({**ALGOS, "offon_new": OffOnDQN})
-    rows = {line.split()[0]: line.split()[1] for line in text.splitlines() if line.startswith("  ")}
+    text = help_description({**ALGOS, "offon_new": OffOnDQN}, ALGO_SUMMARIES)
+    lines = text.splitlines()
+    # A name and its class on one line (two indents), what it trains on the next (deeper) where a summary exists
+    rows = {line.split()[0]: line.split()[1] for line in lines if line.startswith("  ") and not line.startswith("   ")}
     assert list(rows) == [*ALGOS, "offon_new"]
+    for name, summary in ALGO_SUMMARIES.items():
+        row = next(index for index, line in enumerate(lines) if line.split()[:1] == [name])
+        assert lines[row + 1].strip() == summary
+    assert set(ALGO_SUMMARIES) == set(ALGOS), "every name says what it trains"
+    assert "OffOnDQN's defaults" in ALGO_SUMMARIES["offon_lambda_choice"]
     assert rows["offon_dqn"] == "sb3_offon.OffOnDQN" and rows["dqn_nstep"] == "stable_baselines3.DQN"
     assert "docs/offon_dqn.md" in text and "hyperparams" in text
     assert max(len(line) for line in text.splitlines()) <= 100
@@ -83,3 +90,16 @@ def test_help_and_bad_hyperparameter_on_the_command_line(tmp_path: Path) -> None
 def test_one_thread_unless_the_command_line_says(argv: list[str], expected: list[str]) -> None:
     assert one_thread_by_default(argv) == expected
     assert "--num-threads" in help_description(ALGOS)
+
+
+def test_an_unknown_env_is_one_line_with_close_matches() -> None:
+    result = subprocess.run(
+        [sys.executable, "-m", "sb3_offon.train", "--algo", "dqn", "--env", "CartPol-v1", "-n", "10"],
+        capture_output=True,
+        text=True,
+        timeout=TIMEOUT,
+    )
+    assert result.returncode == 2
+    # One line, no traceback; the closest registered ids first (Gymnasium's CartPole-v1 the closest of all)
+    (line,) = result.stderr.strip().splitlines()
+    assert line.startswith("python -m sb3_offon.train: error: unknown environment 'CartPol-v1'; close matches: CartPole-v1")
