@@ -159,6 +159,10 @@ class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, ChunkedMinibatchesMixi
     - ``mc_mixing="lambda"``: at the refresh, so as old as the cached return, at most ``target_update_interval`` env
       steps (or ``lambda_refresh_interval``), while the target network's values there are current.
 
+    Where the target network is updated at least as often as training calls run (the zoo's CartPole-v1 settings:
+    every 10 env steps, training every 256), the two networks are equal whenever a target is computed, and
+    ``double_q`` changes nothing.
+
     :param policy: The policy model to use (MlpPolicy, CnnPolicy, ...)
     :param env: The environment to learn from (if registered in Gym, can be str)
     :param learning_rate: The learning rate, it can be a function of the current progress remaining (from 1 to 0)
