@@ -348,7 +348,9 @@ def main(argv: list[str] | None = None) -> str:
             parser.error("--setup-check needs --random")
         passed, lines = setup_check(study, args.root, json.loads(args.random.read_text())["results"])
         print("\n".join(lines))
-        print(f"Setup check: {'passed' if passed else 'FAILED'}")
+        missing = sum(line.endswith(": not run") for line in lines)
+        outcome = "passed" if passed else f"incomplete ({missing} runs missing)" if missing else "FAILED"
+        print(f"Setup check: {outcome}")
         return "passed" if passed else "failed"
     decision = report(study, args.root, args.out or Path("results") / study.name)
     print(f"{study.name}: {decision}")
