@@ -36,6 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import matplotlib.pyplot as plt
 import numpy as np
 import yaml
+from benchmark import env_folder
 from rliable import metrics
 from run_stats import (
     Run,
@@ -313,7 +314,7 @@ def setup_check(study: Study, root: Path, random_scores: dict) -> tuple[bool, li
     lines, passed = [], True
     for env in study.envs:
         for seed in check.get("seeds", []):
-            folder = root / check["name"] / check["algo"] / f"{env.replace('/', '-')}_{seed}"
+            folder = root / check["name"] / check["algo"] / f"{env_folder(env)}_{seed}"
             try:
                 with np.load(folder / "evaluations.npz") as data:
                     episodes = data["results"][-study.final_evaluations :].ravel()
