@@ -1,9 +1,9 @@
 """
 Named sets of :class:`sb3_offon.OffOnDQN` target arguments.
 
-``OffOnDQN("MlpPolicy", env)`` trains on lambda-returns (the defaults that issue 27's head-to-head chose); the paper's
-Offline-Online DQN, with its coin-flip targets, is ``OffOnDQN("MlpPolicy", env, **PAPER_TARGETS)``, as
-``--algo offon_dqn`` is on the command line. To change one of a preset's values, merge it:
+``OffOnDQN("MlpPolicy", env)`` trains on lambda-returns (the defaults since the second head-to-head, seeds 20-29);
+the paper's Offline-Online DQN, with its coin-flip targets, is ``OffOnDQN("MlpPolicy", env, **PAPER_TARGETS)``, as
+``--algo offon_paper`` is on the command line. To change one of a preset's values, merge it:
 ``OffOnDQN("MlpPolicy", env, **{**PAPER_TARGETS, "mc_final_prob": 0.1})`` (a key passed twice is a ``TypeError``).
 The presets are read-only mappings, so that no caller can change them for the others.
 """
@@ -27,7 +27,8 @@ PAPER_TARGETS: MappingProxyType[str, Any] = MappingProxyType(
     }
 )
 
-# OffOnDQN's defaults since issue 27: lambda-returns with lambda = 0.9 throughout and Peng's Q(lambda) (delta2 = 0)
+# OffOnDQN's defaults since the second head-to-head (seeds 20-29, results/headtohead2/README.md): lambda-returns with
+# lambda = 0.9 throughout and Peng's Q(lambda) (delta2 = 0)
 LAMBDA_CHOICE_TARGETS: MappingProxyType[str, Any] = MappingProxyType(
     {
         "mc_mixing": "lambda",

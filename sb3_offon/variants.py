@@ -13,8 +13,8 @@ Algorithm      delta1 = P(Monte-Carlo target)         delta2 = P(Q-learning give
 =============  =====================================  ==========================================
 
 (``OffOnDQN`` in that table is ``OffOnDQN(policy, env, **PAPER_TARGETS)``: its defaults are lambda-returns since
-issue 27.) DQNMC and DQNSarsa draw one target per sample, as in the paper (``mc_mixing="sample"``), whatever
-OffOnDQN's defaults are.
+the second head-to-head, ``results/headtohead2/README.md``.) DQNMC and DQNSarsa draw one target per sample, as in the
+paper (``mc_mixing="sample"``), whatever OffOnDQN's defaults are.
 
 Every OffOnDQN argument is accepted and can still be set, the probabilities included. ``load()`` restores the
 saved values, whatever these defaults are.

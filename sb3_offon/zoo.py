@@ -7,7 +7,7 @@ The zoo has no plugin hook: its algorithms are the dict ``rl_zoo3.utils.ALGOS`` 
 calling ``rl_zoo3.train.train()`` (docs/guide/sbx.md). :func:`register` does that, and also makes the bundled YAML
 files the default ``-conf``:
 
-- no ``-conf``: ``sb3_offon/hyperparams/{algo}.yml`` when this package ships one (the three algorithms here and
+- no ``-conf``: ``sb3_offon/hyperparams/{algo}.yml`` when this package ships one (every algorithm here and
   ``dqn``, a copy of the zoo's tuned DQN entries, so that benchmarks compare like with like), else the zoo's own file;
 - ``-conf paper`` (any name of a sub-folder of ``sb3_offon/hyperparams``): ``sb3_offon/hyperparams/paper/{algo}.yml``,
   the paper's own settings, found inside the installed package;
@@ -24,6 +24,7 @@ import rl_zoo3.exp_manager as zoo_exp_manager
 import rl_zoo3.hyperparams_opt as zoo_hyperparams_opt
 import rl_zoo3.train as zoo_train
 import rl_zoo3.utils as zoo_utils
+import yaml
 from rl_zoo3.exp_manager import ExperimentManager
 from rl_zoo3.hyperparams_opt import convert_offpolicy_params, sample_dqn_params
 from stable_baselines3 import DQN
@@ -41,29 +42,34 @@ HYPERPARAMS_DIR = Path(__file__).resolve().parent / "hyperparams"
 # The names are the contract of the command line and of the log folders (logs/{algo}/...). ``dqn_nstep`` is SB3's own
 # DQN under a name of its own, so that its settings (the zoo's DQN entries plus ``n_steps``) and its logs are apart
 # from plain DQN's. The zoo already registers ``dqn`` and ``qrdqn`` (sb3-contrib); this package bundles their settings.
-# ``offon_choice`` is OffOnDQN with the target settings that issue 13's search chose, all of them in its YAML file;
-# ``offon_lambda`` is OffOnDQN with mc_mixing="lambda" (lambda-returns), its settings in its YAML file too;
-# ``offon_lambda_choice`` is ``offon_lambda`` with the setting of lambda and delta2 that issue 27's search chose
-# (its YAML file is written by scripts/write_choice.py from the search's report).
+# Every OffOnDQN name differs only in the target settings its YAML file writes out: ``offon_dqn`` is what
+# ``OffOnDQN(policy, env)`` trains (its defaults), ``offon_paper`` the paper's coin flips, ``offon_mc_decay`` and
+# ``offon_watkins`` two configurations of the search.
 ALGOS: dict[str, type[BaseAlgorithm]] = {
     "offon_dqn": OffOnDQN,
+    "offon_paper": OffOnDQN,
     "dqn_mc": DQNMC,
     "dqn_sarsa": DQNSarsa,
     "dqn_nstep": DQN,
-    "offon_choice": OffOnDQN,
-    "offon_lambda": OffOnDQN,
-    "offon_lambda_choice": OffOnDQN,
+    "offon_mc_decay": OffOnDQN,
+    "offon_watkins": OffOnDQN,
 }
+
+# Former names (hyperparams/aliases.yml): each trains what its new name does and logs under the name it was given
+with open(HYPERPARAMS_DIR / "aliases.yml") as aliases_file:
+    ALIASES: dict[str, str] = yaml.safe_load(aliases_file)
+ALGOS.update({alias: ALGOS[name] for alias, name in ALIASES.items()})
 
 # What each name trains, in a line (``--help`` lists them)
 ALGO_SUMMARIES: dict[str, str] = {
-    "offon_dqn": "the paper's coin-flip targets (PAPER_TARGETS)",
+    "offon_dqn": "OffOnDQN's defaults: lambda-returns, lambda 0.9, Peng's Q(lambda)",
+    "offon_paper": "the paper's coin-flip targets (PAPER_TARGETS)",
     "dqn_mc": "the paper's ablation: Monte-Carlo or Q-learning targets, no Sarsa",
     "dqn_sarsa": "the paper's ablation: Q-learning or Sarsa targets, no Monte-Carlo",
     "dqn_nstep": "SB3's DQN with n-step returns (n in the YAML)",
-    "offon_choice": "coin flips as a search chose them: delta1 0.99 -> 0.01, no Sarsa",
-    "offon_lambda": "lambda-returns, lambda 0.9, Watkins's Q(lambda)",
-    "offon_lambda_choice": "OffOnDQN's defaults: lambda-returns, lambda 0.9, Peng's Q(lambda)",
+    "offon_mc_decay": "the search's first choice: coin flips, delta1 0.99 -> 0.01, no Sarsa",
+    "offon_watkins": "lambda-returns, lambda 0.9, Watkins's Q(lambda)",
+    **{alias: f"former name of {name}" for alias, name in ALIASES.items()},
 }
 
 
@@ -71,12 +77,13 @@ def resolve_config(algo: str, config: str | None) -> str | None:
     """
     The hyperparameter file the zoo should read for ``algo`` given the ``-conf`` argument.
 
-    :param algo: the ``--algo`` name
+    :param algo: the ``--algo`` name (a former name in ``ALIASES`` reads its new name's file)
     :param config: the ``-conf`` argument (None when absent)
     :return: the bundled ``{algo}.yml`` when ``config`` is None and this package ships one; the bundled
         ``{config}/{algo}.yml`` when ``config`` names a bundled set (``paper``); otherwise ``config`` unchanged
         (None lets the zoo use its own ``hyperparams/{algo}.yml``)
     """
+    algo = ALIASES.get(algo, algo)
     if config is None:
         bundled = HYPERPARAMS_DIR / f"{algo}.yml"
         return str(bundled) if bundled.is_file() else None
@@ -209,8 +216,9 @@ def sample_dqn_sarsa_params(trial: optuna.Trial, n_actions: int, n_envs: int, ad
 
 def sample_offon_lambda_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
     """
-    Sampler for OffOnDQN with ``mc_mixing="lambda"`` (``offon_lambda``): the zoo's DQN parameters and the lambda
-    (delta1) and delta2 schedules, sampled as for :func:`sample_offon_dqn_params`; ``mc_mixing`` stays the YAML's.
+    Sampler for OffOnDQN with ``mc_mixing="lambda"`` (``offon_dqn``, ``offon_watkins``): the zoo's DQN parameters and
+    the lambda (delta1) and delta2 schedules, sampled as for :func:`sample_offon_dqn_params`; ``mc_mixing`` stays the
+    YAML's.
 
     :param trial: the Optuna trial
     :param n_actions: number of actions (unused by DQN, part of the zoo's sampler signature)
@@ -238,14 +246,15 @@ def sample_dqn_nstep_params(trial: optuna.Trial, n_actions: int, n_envs: int, ad
 
 SAMPLERS = {
     "dqn_nstep": sample_dqn_nstep_params,
-    "offon_dqn": sample_offon_dqn_params,
+    "offon_paper": sample_offon_dqn_params,
     "dqn_mc": sample_dqn_mc_params,
     "dqn_sarsa": sample_dqn_sarsa_params,
-    # The search's choice fixes delta2 at 1 (no Sarsa), as DQNMC does: the same parameters are worth sampling
-    "offon_choice": sample_dqn_mc_params,
-    "offon_lambda": sample_offon_lambda_params,
-    "offon_lambda_choice": sample_offon_lambda_params,
+    # The search's first choice fixes delta2 at 1 (no Sarsa), as DQNMC does: the same parameters are worth sampling
+    "offon_mc_decay": sample_dqn_mc_params,
+    "offon_watkins": sample_offon_lambda_params,
+    "offon_dqn": sample_offon_lambda_params,
 }
+SAMPLERS.update({alias: SAMPLERS[name] for alias, name in ALIASES.items()})
 
 
 def register() -> None:

@@ -32,13 +32,16 @@ the same function becomes a Ray task (one CPU each), on a local Ray instance or,
 
 Usage::
 
+    # a study stated as a file (benchmarks/): its grid, resumed where it stopped; then its report
+    python scripts/benchmark.py --study benchmarks/headtohead2.yml --workers 2
+    python scripts/study.py benchmarks/headtohead2.yml
     # the paper's settings, Figures 8, 10, 12: CartPole-v1, MountainCar-v0, LunarLander-v3, four variants, 10 seeds
     python scripts/benchmark.py --set paper
     # the tuned settings (also Acrobot-v1)
     python scripts/benchmark.py --set tuned
     # Section 4.4
     python scripts/benchmark.py --set paper --envs CartPoleFallPenalty-v1 MountainCarGoalBonus-v0
-    # a grid of its own on fresh seeds, in <root>/headtohead/{algo}/{env}_{seed}/ (issue 13's head-to-head)
+    # a grid of its own on fresh seeds, in <root>/headtohead/{algo}/{env}_{seed}/ (the first head-to-head)
     python scripts/benchmark.py --set tuned --name headtohead --algos dqn dqn_nstep qrdqn --seeds 10-19
     # on a Ray cluster
     python scripts/benchmark.py --set paper --ray-address auto
@@ -66,7 +69,7 @@ import numpy as np
 import yaml
 from tqdm import tqdm
 
-ALGOS = ["offon_dqn", "dqn_mc", "dqn_sarsa", "dqn"]
+ALGOS = ["offon_paper", "dqn_mc", "dqn_sarsa", "dqn"]
 # The paper's Figures 8, 10 and 12; the tuned set also has the zoo's Acrobot-v1 entry
 DEFAULT_ENVS = {
     "paper": ["CartPole-v1", "MountainCar-v0", "LunarLander-v3"],
@@ -118,10 +121,17 @@ def seeds_text(seeds: list[int]) -> str:
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawTextHelpFormatter)
+    parser.add_argument(
+        "--study",
+        type=Path,
+        default=None,
+        help="a study file (benchmarks/<study>.yml): its settings, algos, envs, seeds, evaluation and folder; --algos, "
+        "--envs and --seeds then narrow it (e.g. one algorithm last)",
+    )
     parser.add_argument("--set", default="paper", choices=available_sets(), help="hyperparameter set (default: paper)")
-    parser.add_argument("--algos", nargs="+", default=ALGOS, help=f"algorithms (default: {' '.join(ALGOS)})")
+    parser.add_argument("--algos", nargs="+", default=None, help=f"algorithms (default: {' '.join(ALGOS)})")
     parser.add_argument("--envs", nargs="+", default=None, help="env ids (default: the set's benchmark envs)")
-    parser.add_argument("--seeds", nargs="+", default=["10"], help="a count (10: seeds 0-9), a list (0 3 7) or a range (5-9)")
+    parser.add_argument("--seeds", nargs="+", default=None, help="a count (10: seeds 0-9), a list (0 3 7) or a range (5-9)")
     parser.add_argument("-n", "--n-timesteps", type=int, default=None, help="override the budget of every run (tests)")
     parser.add_argument("--eval-freq", type=int, default=None, help="env steps between evaluations (default: budget / 20)")
     parser.add_argument("--n-evals", type=int, default=20, help="evaluations per run when --eval-freq is not given")
@@ -155,17 +165,45 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--force", action="store_true", help="redo finished runs that were made with other settings")
     parser.add_argument("--dry-run", action="store_true", help="list the runs and their commands, run nothing")
     args = parser.parse_args(argv)
-    args.seeds = parse_seeds(args.seeds)
+    args.run_names = {}
+    if args.study is not None:
+        from_study(args, parser)
+    args.algos = args.algos or ALGOS
+    args.seeds = parse_seeds(args.seeds or ["10"])
     args.envs = args.envs or DEFAULT_ENVS.get(args.set, DEFAULT_ENVS["paper"])
     args.ray = args.ray or args.ray_address is not None
     return args
+
+
+def from_study(args: argparse.Namespace, parser: argparse.ArgumentParser) -> None:
+    """The grid of a study file (``scripts/study.py`` reads the same file), narrowed by --algos, --envs and --seeds."""
+    study = yaml.safe_load(args.study.read_text())
+    for option, key, given, listed in (
+        ("--algos", "algos", args.algos, study["algos"]),
+        ("--envs", "envs", args.envs, study["envs"]),
+        ("--seeds", "seeds", parse_seeds(args.seeds) if args.seeds else None, study["seeds"]),
+    ):
+        if given and not set(given) <= set(listed):
+            parser.error(f"{option} {' '.join(map(str, given))}: not in the study's {key} {listed}")
+    args.set = study.get("settings", "tuned")
+    args.name = study.get("folder", study["name"])
+    args.algos = args.algos or list(study["algos"])
+    args.envs = args.envs or list(study["envs"])
+    args.seeds = args.seeds or [f"{seed}-{seed}" for seed in study["seeds"]]
+    evaluation = study.get("evaluation", {})
+    args.eval_freq = args.eval_freq or evaluation.get("every")
+    args.eval_episodes = evaluation.get("episodes", args.eval_episodes)
+    args.run_names = dict(study.get("run_names", {}))
 
 
 # ----------------------------------------------------------------------------------------------------------------------
 # The grid: one spec (a plain dict, sent to the task function) per run
 # ----------------------------------------------------------------------------------------------------------------------
 def config_file(hyperparams_set: str, algo: str) -> Path:
+    """The YAML file the zoo reads for ``algo`` in the set (a former name, ``hyperparams/aliases.yml``, reads its new
+    name's)."""
     folder = hyperparams_dir()
+    algo = yaml.safe_load((folder / "aliases.yml").read_text()).get(algo, algo)
     return folder / f"{algo}.yml" if hyperparams_set == "tuned" else folder / hyperparams_set / f"{algo}.yml"
 
 
@@ -199,6 +237,7 @@ def build_specs(args: argparse.Namespace) -> list[dict]:
                         "set": args.set,
                         "grid": args.name or args.set,
                         "algo": algo,
+                        **({"run_name": args.run_names[algo]} if algo in args.run_names else {}),
                         "env": env,
                         "seed": seed,
                         "n_timesteps": n_timesteps,
@@ -225,7 +264,9 @@ def env_folder(env: str) -> str:
 
 
 def run_dir(root: Path, spec: dict) -> Path:
-    return root / spec.get("grid", spec["set"]) / spec["algo"] / f"{env_folder(spec['env'])}_{spec['seed']}"
+    """``<root>/<grid>/<algo>/<env>_<seed>``; a study's ``run_names`` keep a renamed algorithm in its runs' folder."""
+    folder = spec.get("run_name", spec["algo"])
+    return root / spec.get("grid", spec["set"]) / folder / f"{env_folder(spec['env'])}_{spec['seed']}"
 
 
 def run_threads(spec: dict) -> str:

@@ -15,10 +15,8 @@ into ``--out`` (default ``results/<set>``):
 - ``table.md``: per env and algorithm, final return, area under the curve and env steps to the solve threshold, each
   a mean over seeds with a 95% CI; the aggregates; the Section 4.4 measures.
 
-With ``--page docs/benchmarks.md`` (the documentation's results page), the same tables also replace the block between
-``<!-- results:<set>:start -->`` and ``<!-- results:<set>:end -->`` in that file (the text outside the markers is left
-as it is; a file without the markers is an error), so that the page's tables are always the ones of ``table.md``.
-``--readme`` is the option's former name, kept as an alias.
+The studies of ``benchmarks/`` are reported by ``scripts/study.py``, which calls :func:`report` on each study's runs
+(named as the study file names them); this command reports any grid folder as it is.
 
 Definitions (per run; then mean over seeds with a 95% percentile stratified-bootstrap CI from rliable, seeded):
 
@@ -38,11 +36,10 @@ Definitions (per run; then mean over seeds with a 95% percentile stratified-boot
 
 Usage::
 
-    python scripts/plot.py --root results/raw --set paper --out results/paper --page docs/benchmarks.md
+    python scripts/plot.py --root results/raw --set my_grid --out results/my_grid
 """
 
 import argparse
-import os
 import sys
 import warnings
 from pathlib import Path
@@ -77,7 +74,8 @@ from run_stats import (
 )
 
 COLORS = {
-    "offon_dqn": "tab:red",
+    "offon_paper": "tab:red",
+    "offon_dqn": "tab:cyan",
     "dqn_mc": "tab:green",
     "dqn_sarsa": "tab:orange",
     "dqn": "tab:blue",
@@ -99,15 +97,6 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--out", type=Path, default=None, help="output folder (default: results/<set>)")
     parser.add_argument("--last", type=int, default=3, help="evaluations averaged into the final return (default: 3)")
     parser.add_argument("--reps", type=int, default=2000, help="bootstrap resamples (default: 2000)")
-    parser.add_argument(
-        "--page",
-        "--readme",
-        dest="page",
-        type=Path,
-        default=None,
-        help="also write the tables into this Markdown file (docs/benchmarks.md), between <!-- results:<set>:start --> and"
-        " <!-- results:<set>:end --> (--readme: the former name)",
-    )
     args = parser.parse_args(argv)
     args.out = args.out or Path("results") / args.set
     return args
@@ -313,12 +302,12 @@ def left_out_text(left_out: dict[str, str]) -> str:
 
 
 def command_text(args: argparse.Namespace) -> str:
-    page = f" --page {args.page}" if args.page is not None else ""
-    return f"python scripts/plot.py --root {args.root} --set {args.set} --out {args.out}{page}"
+    """The command that wrote the report: a study's (``args.command``), or this script's."""
+    return getattr(args, "command", None) or f"python scripts/plot.py --root {args.root} --set {args.set} --out {args.out}"
 
 
 def table_sections(args: argparse.Namespace, runs: dict, scores: dict, result: dict | None) -> list[tuple[str, list[str]]]:
-    """The tables, as (title, lines): ``table.md``'s sections, and the page's block."""
+    """The tables, as (title, lines): ``table.md``'s sections."""
     lines = [
         "| Env | Algorithm | Seeds | Budget | Final return | AUC | Steps to threshold | Solved |",
         "|---|---|---:|---:|---|---|---|---:|",
@@ -390,7 +379,7 @@ def table_sections(args: argparse.Namespace, runs: dict, scores: dict, result: d
 
 
 def against_baseline(args: argparse.Namespace, runs: dict, scores: dict) -> list[str]:
-    """Per env, every other algorithm against DQN: the measures of issue 13's targets (no lines without DQN)."""
+    """Per env, every other algorithm against DQN: the measures of the first head-to-head's targets (no lines without DQN)."""
     header = [
         f"Per env: mean final return minus {label(BASELINE)}'s; where the AUC's 95% CI lies against {label(BASELINE)}'s "
         f"(apart above, apart below, or overlapping); the IQM over seeds of the steps to threshold divided by "
@@ -442,57 +431,18 @@ def write_table(args: argparse.Namespace, n_runs: int, sections: list[tuple[str,
     written.append(path)
 
 
-def page_markers(hyperparams_set: str) -> tuple[str, str]:
-    return f"<!-- results:{hyperparams_set}:start -->", f"<!-- results:{hyperparams_set}:end -->"
-
-
-def page_block(args: argparse.Namespace, n_runs: int, sections: list[tuple[str, list[str]]], page: Path) -> str:
-    """The page's copy of the tables: ``table.md``'s sections under bold titles, not headings of the page's own."""
-    table = Path(os.path.relpath(args.out.resolve() / "table.md", page.resolve().parent)).as_posix()
-    name = (args.out / "table.md").as_posix()  # as the command named it: results/<set>/table.md
-    lines = [
-        f"<!-- Written by `{command_text(args)}`: edit scripts/plot.py, not this block. -->",
-        f"From {n_runs} runs: means over seeds with 95% stratified-bootstrap CIs; definitions in [{name}]({table}).",
-    ]
-    for title, body in sections:
-        lines += ["", f"**{title}**", "", *body]
-    return "\n".join(lines)
-
-
-def check_page(path: Path, hyperparams_set: str) -> str:
-    """The text of ``path``, which must hold the set's start and end markers once each, in that order."""
-    start, end = page_markers(hyperparams_set)
-    if not path.is_file():
-        raise SystemExit(f"--page {path}: no such file")
-    text = path.read_text()
-    for marker in (start, end):
-        if text.count(marker) != 1:
-            found = "not found" if marker not in text else f"found {text.count(marker)} times"
-            raise SystemExit(f"{path}: the marker {marker} is {found}; put {start} and {end}, once each, where the tables go")
-    if text.index(end) < text.index(start):
-        raise SystemExit(f"{path}: the marker {end} comes before {start}")
-    return text
-
-
-def replace_page_block(path: Path, hyperparams_set: str, block: str) -> None:
-    """Put ``block`` between the set's two markers of ``path``; the text outside them is kept as it is."""
-    start, end = page_markers(hyperparams_set)
-    head, rest = check_page(path, hyperparams_set).split(start)
-    tail = rest.split(end)[1]
-    # A blank line before the end marker: a table ends there in every Markdown reader
-    path.write_text(f"{head}{start}\n{block}\n\n{end}{tail}")
-
-
 # ----------------------------------------------------------------------------------------------------------------------
 # Main
 # ----------------------------------------------------------------------------------------------------------------------
-def main(argv: list[str] | None = None) -> None:
-    args = parse_args(argv)
-    if args.page is not None:
-        check_page(args.page, args.set)  # before the work, not after it
-    runs = load_runs(args.root / args.set)
-    if not runs:
-        raise SystemExit(f"No finished run under {args.root / args.set}")
+def report(args: argparse.Namespace, runs: dict[str, dict[str, list[Run]]]) -> list[Path]:
+    """
+    Write the figures and ``table.md`` of ``runs`` (``runs[env][algo]``, as ``load_runs`` gives them) into ``args.out``.
+
+    :param args: ``root``, ``set`` (the runs' folder under it), ``out``, ``last``, ``reps``; optionally ``command``, the
+        command named in ``table.md`` (default: this script's)
+    :param runs: the finished runs to report
+    :return: the files written
+    """
     args.out.mkdir(parents=True, exist_ok=True)
     written: list[Path] = []
     scores: dict[str, dict[str, dict]] = {}
@@ -512,9 +462,15 @@ def main(argv: list[str] | None = None) -> None:
     sections = table_sections(args, runs, scores, result)
     n_runs = sum(len(by_seed) for by_algo in runs.values() for by_seed in by_algo.values())
     write_table(args, n_runs, sections, written)
-    if args.page is not None:
-        replace_page_block(args.page, args.set, page_block(args, n_runs, sections, args.page))
-        written.append(args.page)
+    return written
+
+
+def main(argv: list[str] | None = None) -> None:
+    args = parse_args(argv)
+    runs = load_runs(args.root / args.set)
+    if not runs:
+        raise SystemExit(f"No finished run under {args.root / args.set}")
+    written = report(args, runs)
     print("Wrote:\n  " + "\n  ".join(str(path) for path in written))
 
 

@@ -1,5 +1,5 @@
 """
-The runs of a benchmark and their statistics, shared by ``scripts/plot.py`` and the head-to-head rules.
+The runs of a benchmark and their statistics, shared by ``scripts/plot.py``, ``scripts/study.py`` and ``scripts/search.py``.
 
 - Loading: every finished run (``done.json``) under ``<root>/<set>/<algo>/<env>_<seed>/``, with its evaluation curve
   and its training episodes (the monitor CSVs);
@@ -26,14 +26,18 @@ from scipy import stats
 warnings.filterwarnings("ignore", category=FutureWarning, module="arch")
 
 # The paper's four variants first, in this order, in every table and figure; other algorithms after them by name
-ALGOS = ["offon_dqn", "dqn_mc", "dqn_sarsa", "dqn"]
+ALGOS = ["offon_paper", "dqn_mc", "dqn_sarsa", "dqn"]
+# Labels of the command-line names (sb3_offon.zoo.ALGOS), the former names included: the studies' runs carry them
 LABELS = {
-    "offon_dqn": "Off-On DQN",
+    "offon_paper": "Off-On DQN",
     "dqn_mc": "DQN with MC",
     "dqn_sarsa": "DQN with Sarsa",
     "dqn": "DQN",
     "dqn_nstep": "n-step DQN",
     "qrdqn": "QR-DQN",
+    "offon_dqn": "OffOnDQN (defaults)",
+    "offon_mc_decay": "Off-On DQN (search's choice)",
+    "offon_watkins": "Off-On λ",
     "offon_choice": "Off-On DQN (search's choice)",
     "offon_lambda": "Off-On λ",
     "offon_lambda_choice": "Off-On λ (search's choice)",
@@ -102,23 +106,6 @@ def load_runs(folder: Path) -> dict[str, dict[str, list[Run]]]:
     }
 
 
-def scores_on_seeds(folder: Path, algos: tuple[str, ...], seeds: range, last: int = 3) -> tuple[dict, dict]:
-    """
-    ``runs[env][algo]`` and ``scores[env][algo]`` (``run_scores``'s fields) of the finished runs of ``algos`` on ``seeds``
-    only: a head-to-head's rule reads its fresh seeds and nothing else.
-    """
-    runs: dict[str, dict[str, list[Run]]] = {}
-    scores: dict[str, dict[str, dict[str, np.ndarray]]] = {}
-    for env, by_algo in load_runs(folder).items():
-        for algo in algos:
-            kept = [run for run in by_algo.get(algo, []) if run.seed in seeds]
-            if kept:
-                grid, curves = evaluation_curves(kept)
-                runs.setdefault(env, {})[algo] = kept
-                scores.setdefault(env, {})[algo] = run_scores(kept, grid, curves, last, threshold(env))
-    return runs, scores
-
-
 def algo_order(algo: str) -> tuple[int, str]:
     return (ALGOS.index(algo) if algo in ALGOS else len(ALGOS), algo)
 
@@ -145,13 +132,20 @@ def threshold(env: str) -> float | None:
 # ----------------------------------------------------------------------------------------------------------------------
 def interval_estimates(scores: dict, aggregate, reps: int) -> tuple[dict, dict]:
     """
-    ``rly.get_interval_estimates``, reproducible: the same data give the same intervals at every redraw.
+    ``rly.get_interval_estimates``, reproducible and independent of the other entries of ``scores``.
 
     rliable's ``StratifiedBootstrap`` draws its resamples from NumPy's global RNG (``update_indices`` calls
-    ``np.random.choice``) and ignores ``random_state``, so the global RNG is seeded before each call.
+    ``np.random.choice``) and ignores ``random_state``; given several algorithms at once it draws theirs one after the
+    other, so an algorithm's interval would depend on which algorithms came before it. The global RNG is therefore
+    seeded before each algorithm's estimate: the same scores give the same interval whoever asks, and with what. The
+    columns (tasks) must come in a fixed order too: every caller passes them sorted by env id (``normalised_matrices``).
     """
-    np.random.seed(0)
-    return rly.get_interval_estimates(scores, aggregate, reps=reps, random_state=np.random.RandomState(0))
+    points, intervals = {}, {}
+    for key, value in scores.items():
+        np.random.seed(0)
+        point, interval = rly.get_interval_estimates({key: value}, aggregate, reps=reps, random_state=np.random.RandomState(0))
+        points[key], intervals[key] = point[key], interval[key]
+    return points, intervals
 
 
 def mean_ci(values: np.ndarray, reps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -268,6 +262,7 @@ def aggregate_cells(runs: dict[str, dict[str, list[Run]]]) -> tuple[list[str], d
 def normalised_matrices(runs: dict, scores: dict, envs: list[str], algos: list[str]) -> dict[str, dict[str, np.ndarray]]:
     """``matrices[measure][algo]``: (runs, tasks) of ``envs``' scores min-max normalised over every algorithm's runs there."""
     matrices: dict[str, dict[str, np.ndarray]] = {"final": {}, "auc": {}}
+    envs = sorted(envs)  # the columns in one order for every caller: rliable's resamples follow it
     for measure in matrices:
         lows = {env: min(scores[env][algo][measure].min() for algo in algos) for env in envs}
         highs = {env: max(scores[env][algo][measure].max() for algo in algos) for env in envs}

@@ -1,5 +1,5 @@
 """
-What the searches of issues 13 and 27 run: the tasks, the tuning seeds and every candidate of every round, each with
+What the search runs: the tasks, the tuning seeds and every candidate of every round, each with
 the settings it overrides in the bundled tuned hyperparameters. ``scripts/search.py`` runs and judges them; why each
 round has the candidates it has, and the criterion that judges it, are in its docstring and in
 ``results/search/README.md``, both written before the round's runs.
@@ -31,11 +31,18 @@ class Candidate:
     description: str = ""
     # Per task, more overrides (after ``hyperparams``)
     per_env: dict[str, list[str]] = field(default_factory=dict)
-    # 1: the search as first stated; 2: the round added after the head-to-head; 3 to 5: the lambda-returns of issue 27
+    # 1: the search as first stated; 2: the round added after the head-to-head; 3 to 5: the lambda-return stages
     # (each round its own criterion, scripts/search.py's docstring)
     round: int = 1
     # Per task, the seeds it is judged on where they are not the tuning seeds 0-4
     seeds: dict[str, list[int]] = field(default_factory=dict)
+    # The folder name of its runs where it is not ``algo``: the paper's configuration ran as offon_dqn, its name until
+    # 2026-11-27 (today offon_dqn is OffOnDQN's defaults and offon_paper the paper's)
+    run_name: str = ""
+
+    @property
+    def folder_name(self) -> str:
+        return self.run_name or self.algo
 
     def seeds_on(self, env: str) -> list[int]:
         return self.seeds.get(env, TUNING_SEEDS)
@@ -47,10 +54,16 @@ OBSERVED_BOUND = [MAX, "mc_truncation:'drop'", "mc_initial_prob:1.0", "mc_final_
 CANDIDATES = [
     Candidate("dqn", "dqn", reuse_tuned=True, description="SB3's DQN, the zoo's settings (the reference)"),
     Candidate(
-        "paper", "offon_dqn", reuse_tuned=True, description="the paper: one target drawn, delta1 and delta2 0.99 -> 0.01"
+        "paper",
+        "offon_paper",
+        reuse_tuned=True,
+        description="the paper: one target drawn, delta1 and delta2 0.99 -> 0.01",
+        run_name="offon_dqn",
     ),
     Candidate("mc_sample", "dqn_mc", reuse_tuned=True, description="DQN with MC: delta1 0.99 -> 0.01, no Sarsa"),
-    Candidate("max_paper", "offon_dqn", [MAX], description="lower bound max(G, y_TD), the paper's schedules"),
+    Candidate(
+        "max_paper", "offon_paper", [MAX], description="lower bound max(G, y_TD), the paper's schedules", run_name="offon_dqn"
+    ),
     Candidate("max_qlearning", "dqn_mc", [MAX], description="lower bound, delta1 0.99 -> 0.01, no Sarsa"),
     Candidate(
         "max_always",
@@ -98,7 +111,7 @@ def trace_cuts(initial: float, final: float) -> list[str]:
     return [f"qlearning_initial_prob:{initial}", f"qlearning_final_prob:{final}"]
 
 
-# Round 3: the lambda-returns (issue 27); offon_lambda's YAML gives every other setting
+# Round 3: the lambda-returns; offon_lambda's YAML gives every other setting
 WATKINS, PENG = trace_cuts(1.0, 1.0), trace_cuts(0.0, 0.0)
 CANDIDATES += [
     *[

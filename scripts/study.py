@@ -1,20 +1,30 @@
 """
 Judge and report a study stated as a file (``benchmarks/<study>.yml``): its tables, figures and verdict, from its runs.
 
-A study file names what was run (``algos``, ``envs``, ``seeds``, the ``name`` of its folder under the results root),
-how a run is scored (``final_evaluations``: the evaluations averaged into the final return; the AUC is the mean
-evaluation return over training), the fixed ``normalisation`` of each env's scores (``[low, high]``), the statistics
-(``confidence``, ``bootstrap_reps``), and the ``rule``: criteria about its ``candidate``, each of one kind:
+A study file names what was run (``settings``: the hyperparameter set; ``algos``, ``envs``, ``seeds``; ``folder``: the
+runs' folder under the results root, default its ``name``; ``run_names``: the name a study's algorithm carries on disk
+where it differs, for runs made before a command-line name changed), how a run is scored (``final_evaluations``: the
+evaluations averaged into the final return; the AUC is the mean evaluation return over training), the normalisation
+of scores (``normalisation``: fixed ``[low, high]`` per env, or ``minmax``: per env over every run of the study's
+algorithms there), the statistics (``confidence``, ``bootstrap_reps``), and, for a study that decides something, the
+``rule``: criteria about its ``candidate``, each of one kind:
 
 - ``final_not_below`` (``reference``): on every env, the upper bound of the interval of the candidate's mean final
   return minus the reference's is at least 0 (two-sample percentile bootstrap, the seeds of each side resampled apart);
+- ``final_within`` (``reference``, ``margin``): on every env, the candidate's mean final return is at least the
+  reference's minus ``margin`` times the env's range (``ranges``: ``[low, high]`` per env);
 - ``iqm_above`` (``measure``: ``auc`` or ``final``; ``reference``): the candidate's IQM of normalised scores over every
-  env and seed is above the reference's (point estimates; rliable's stratified bootstrap gives their intervals).
+  env and seed is above the reference's (point estimates; rliable's stratified bootstrap gives their intervals);
+- ``auc_apart_above`` (``reference``, ``at_least``): on at least that many envs, the 95% interval of the candidate's
+  mean AUC lies wholly above the reference's.
 
-The verdict is "holds" when every criterion holds, "does not hold" otherwise, and "incomplete" while runs are missing
-(the tables then show what there is). ``also_against`` lists the other algorithms the same criteria are reported for.
-A ``setup_check`` block (``algo``, ``seeds``, ``name``) is judged with ``--setup-check``: the algorithm's final
-evaluation episodes against a random policy's return (``--random``, from ``scripts/random_policy.py``).
+The verdict is "holds" when every criterion holds, "does not hold" otherwise, and "incomplete" while runs are missing.
+``also_against`` lists the other algorithms the same criteria are reported for. The report (``tables``): ``study``
+(the default) writes this script's tables and figures with the verdict in ``table.md``; ``benchmark`` writes
+``scripts/plot.py``'s (per-env tables with steps to threshold, the paper's figures, aggregates) and the verdict, if the
+study has a rule, in ``verdict.md``. A ``setup_check`` block (``algo``, ``seeds``, ``name``) is judged with
+``--setup-check``: the algorithm's final evaluation episodes against a random policy's return (``--random``, from
+``scripts/random_policy.py``).
 
 Usage::
 
@@ -25,7 +35,7 @@ Usage::
 import argparse
 import json
 import sys
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import matplotlib
@@ -35,23 +45,30 @@ matplotlib.use("Agg")
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import matplotlib.pyplot as plt
 import numpy as np
+import plot
 import yaml
 from benchmark import env_folder
 from rliable import metrics
 from run_stats import (
     Run,
+    algo_order,
     evaluation_curves,
     interval_estimates,
     label,
     load_runs,
     mean_ci,
     mean_difference,
+    mean_interval,
+    normalised_matrices,
+    position,
     run_scores,
+    threshold,
     two_sample_ci,
 )
 from scipy import stats
 
 COLORS = {"dqn": "tab:blue", "dqn_nstep": "tab:orange", "qrdqn": "tab:green", "offon_lambda_choice": "tab:red"}
+MINMAX = "minmax"
 
 
 @dataclass
@@ -64,55 +81,77 @@ class Study:
     algos: list[str]
     envs: list[str]
     seeds: list[int]
-    candidate: str
-    rule: list[dict]
-    normalisation: dict[str, tuple[float, float]]
+    normalisation: dict[str, tuple[float, float]] | str
+    candidate: str | None = None
+    rule: list[dict] = field(default_factory=list)
     final_evaluations: int = 3
     reps_difference: int = 10_000
     reps_iqm: int = 2_000
     also_against: list[str] = field(default_factory=list)
     setup_check: dict | None = None
     stated: str = ""
+    folder: str = ""
+    run_names: dict[str, str] = field(default_factory=dict)
+    ranges: dict[str, tuple[float, float]] = field(default_factory=dict)
+    tables: str = "study"
 
     @classmethod
     def read(cls, path: Path) -> "Study":
         data = yaml.safe_load(path.read_text())
         reps = data.get("bootstrap_reps", {})
-        return cls(
+        normalisation = data.get("normalisation", MINMAX)
+        if normalisation != MINMAX:
+            normalisation = {env: (float(low), float(high)) for env, (low, high) in normalisation.items()}
+        study = cls(
             path=path,
             name=data["name"],
             question=" ".join(data["question"].split()),
             algos=list(data["algos"]),
             envs=list(data["envs"]),
             seeds=[int(seed) for seed in data["seeds"]],
-            candidate=data["candidate"],
-            rule=list(data["rule"]),
-            normalisation={env: (float(low), float(high)) for env, (low, high) in data["normalisation"].items()},
+            normalisation=normalisation,
+            candidate=data.get("candidate"),
+            rule=list(data.get("rule", [])),
             final_evaluations=int(data.get("final_evaluations", 3)),
             reps_difference=int(reps.get("difference", 10_000)),
             reps_iqm=int(reps.get("iqm", 2_000)),
             also_against=list(data.get("also_against", [])),
             setup_check=data.get("setup_check"),
             stated=str(data.get("stated", "")),
+            folder=str(data.get("folder", data["name"])),
+            run_names=dict(data.get("run_names", {})),
+            ranges={env: (float(low), float(high)) for env, (low, high) in data.get("ranges", {}).items()},
+            tables=str(data.get("tables", "study")),
         )
+        if study.tables not in ("study", "benchmark"):
+            raise ValueError(f"{path}: tables must be 'study' or 'benchmark', not {study.tables!r}")
+        if study.rule and study.candidate not in study.algos:
+            raise ValueError(f"{path}: the candidate {study.candidate!r} is not one of the algos {study.algos}")
+        return study
 
 
 # ----------------------------------------------------------------------------------------------------------------------
 # Scores
 # ----------------------------------------------------------------------------------------------------------------------
 def study_runs(study: Study, root: Path) -> tuple[dict[str, dict[str, list[Run]]], dict[str, dict[str, dict]]]:
-    """``runs[env][algo]`` and ``scores[env][algo]`` (final, auc: one per run, by seed) of the study's finished runs."""
-    folder = root / study.name
+    """
+    ``runs[env][algo]`` and ``scores[env][algo]`` (final, auc, steps, solved: one per run, by seed) of the study's
+    finished runs, under the study's names for its algorithms; envs sorted, algorithms in ``run_stats``' table order.
+    """
+    folder = root / study.folder
     loaded = load_runs(folder) if folder.is_dir() else {}
     runs: dict[str, dict[str, list[Run]]] = {}
     scores: dict[str, dict[str, dict]] = {}
-    for env in study.envs:
-        for algo in study.algos:
-            kept = [run for run in loaded.get(env, {}).get(algo, []) if run.seed in study.seeds]
+    for env in sorted(study.envs):
+        for algo in sorted(study.algos, key=algo_order):
+            # Runs made under the algorithm's former name (``run_names``) and under its own
+            names = dict.fromkeys([study.run_names.get(algo, algo), algo])
+            found = [run for name in names for run in loaded.get(env, {}).get(name, []) if run.seed in study.seeds]
+            kept = sorted((replace(run, algo=algo) for run in found), key=lambda run: run.seed)
             if kept:
                 grid, curves = evaluation_curves(kept)
                 runs.setdefault(env, {})[algo] = kept
-                scores.setdefault(env, {})[algo] = run_scores(kept, grid, curves, study.final_evaluations, None)
+                scores.setdefault(env, {})[algo] = run_scores(kept, grid, curves, study.final_evaluations, threshold(env))
     return runs, scores
 
 
@@ -126,6 +165,11 @@ def normalised(study: Study, runs: dict, scores: dict, algo: str, measure: str) 
     envs = sorted(study.envs)
     if any(len(runs.get(env, {}).get(algo, [])) != len(study.seeds) for env in envs):
         return None
+    if study.normalisation == MINMAX:
+        # Per env over every run of the study's algorithms there: only once every algorithm's runs are in
+        if missing_runs(study, runs):
+            return None
+        return normalised_matrices(runs, scores, envs, list(study.algos))[measure][algo]
     columns = []
     for env in envs:
         low, high = study.normalisation[env]
@@ -178,11 +222,56 @@ def judge_criterion(study: Study, runs: dict, scores: dict, criterion: dict, alg
             f"{name} above {label(reference)}'s: {ours[0]:.3f} [{ours[1]:.3f}, {ours[2]:.3f}] against "
             f"{theirs[0]:.3f} [{theirs[1]:.3f}, {theirs[2]:.3f}]"
         )
+    if kind == "final_within":
+        return final_within(study, runs, scores, algo, reference, float(criterion["margin"]))
+    if kind == "auc_apart_above":
+        return auc_apart_above(study, runs, scores, algo, reference, int(criterion["at_least"]))
     raise ValueError(f"unknown criterion kind {kind!r} in the rule")
 
 
+def complete_pair(study: Study, runs: dict, env: str, algo: str, reference: str) -> bool:
+    by_algo = runs.get(env, {})
+    return all(len(by_algo.get(name, [])) == len(study.seeds) for name in (algo, reference))
+
+
+def final_within(study: Study, runs: dict, scores: dict, algo: str, reference: str, margin: float) -> tuple[bool | None, str]:
+    """On every env, ``algo``'s mean final return at least the reference's minus ``margin`` times the env's range."""
+    text = f"final return at least {label(reference)}'s minus {margin:g} of the env's range on every env"
+    below, bars = [], []
+    for env in study.envs:
+        if not complete_pair(study, runs, env, algo, reference):
+            return None, f"{text}: runs missing on {env}"
+        low, high = study.ranges[env]
+        theirs = float(np.mean(scores[env][reference]["final"]))
+        bar, ours = theirs - margin * (high - low), float(np.mean(scores[env][algo]["final"]))
+        bars.append(f"{env} {ours:.1f} against the bar {bar:.1f} ({label(reference)} {theirs:.1f})")
+        if ours < bar:
+            below.append(env)
+    return not below, f"{text}: {'; '.join(bars)}" + (f"; below on {', '.join(below)}" if below else "")
+
+
+def auc_apart_above(
+    study: Study, runs: dict, scores: dict, algo: str, reference: str, at_least: int
+) -> tuple[bool | None, str]:
+    """On at least ``at_least`` envs, the 95% interval of ``algo``'s mean AUC lies above the reference's, apart."""
+    text = f"AUC interval above {label(reference)}'s, apart, on at least {at_least} envs"
+    apart, cells = 0, []
+    for env in study.envs:
+        if not complete_pair(study, runs, env, algo, reference):
+            return None, f"{text}: runs missing on {env}"
+        ours = mean_interval(scores[env][algo]["auc"], study.reps_iqm)
+        theirs = mean_interval(scores[env][reference]["auc"], study.reps_iqm)
+        where = position(ours, theirs)
+        apart += where == "above, apart"
+        cells.append(f"{env} [{ours[0]:.1f}, {ours[1]:.1f}] against [{theirs[0]:.1f}, {theirs[1]:.1f}] ({where})")
+    return apart >= at_least, f"{text}: on {apart}; " + "; ".join(cells)
+
+
 def verdict(study: Study, runs: dict, scores: dict) -> tuple[str, list[str]]:
-    """The study's verdict ("holds", "does not hold", "incomplete") and a line per criterion."""
+    """The study's verdict ("holds", "does not hold", "incomplete"; "no rule" for a study that decides nothing) and a
+    line per criterion."""
+    if not study.rule:
+        return "no rule", []
     results = [judge_criterion(study, runs, scores, criterion, study.candidate) for criterion in study.rule]
     lines = [f"{'holds' if ok else 'does not hold' if ok is not None else 'open'}: {text}" for ok, text in results]
     missing = missing_runs(study, runs)
@@ -228,20 +317,14 @@ def difference_table(study: Study, scores: dict) -> list[str]:
     return lines
 
 
-def report(study: Study, root: Path, out: Path) -> str:
-    """Write ``table.md``, the learning curves and the aggregate figure into ``out``; return the verdict."""
-    runs, scores = study_runs(study, root)
-    out.mkdir(parents=True, exist_ok=True)
-    decision, lines = verdict(study, runs, scores)
-    n_runs = sum(len(by_algo.get(algo, [])) for by_algo in runs.values() for algo in study.algos)
+def command(study: Study) -> str:
+    return f"python scripts/study.py {study.path.as_posix()}"
+
+
+def rule_lines(study: Study, runs: dict, scores: dict, decision: str, lines: list[str]) -> list[str]:
+    """The verdict, the rule's criteria and the same criteria against ``also_against``, as Markdown lines."""
     text = [
-        f"<!-- Generated by scripts/study.py {study.path.as_posix()}: do not edit by hand. -->",
-        f"# {study.name}: {n_runs} of {len(study.algos) * len(study.envs) * len(study.seeds)} runs",
-        "",
-        f"Seeds {', '.join(map(str, study.seeds))}; 95% intervals; in brackets after each cell, the runs it averages.",
-        "",
-        f"**Verdict: {decision}.** The rule, stated in `{study.path.as_posix()}` on {study.stated}, for "
-        f"{label(study.candidate)}:",
+        f"**Verdict: {decision}.** The rule (`{study.path.as_posix()}`), stated {study.stated}, for {label(study.candidate)}:",
         "",
         *[f"- {line}" for line in lines],
     ]
@@ -250,6 +333,33 @@ def report(study: Study, root: Path, out: Path) -> str:
         for criterion in study.rule:
             ok, line = judge_criterion(study, runs, scores, {**criterion, "reference": other}, study.candidate)
             text.append(f"  - {'holds' if ok else 'does not hold' if ok is not None else 'open'}: {line}")
+    return text
+
+
+def report(study: Study, root: Path, out: Path) -> str:
+    """Write the study's tables, figures and verdict into ``out``; return the verdict."""
+    runs, scores = study_runs(study, root)
+    out.mkdir(parents=True, exist_ok=True)
+    decision, lines = verdict(study, runs, scores)
+    if study.tables == "benchmark":
+        options = argparse.Namespace(
+            root=root, set=study.folder, out=out, last=study.final_evaluations, reps=study.reps_iqm, command=command(study)
+        )
+        plot.report(options, runs)
+        if study.rule:
+            header = f"<!-- Generated by {command(study)}: do not edit by hand. -->"
+            body = rule_lines(study, runs, scores, decision, lines)
+            (out / "verdict.md").write_text("\n".join([header, f"# {study.name}: verdict", "", *body]) + "\n")
+        return decision
+    n_runs = sum(len(by_algo.get(algo, [])) for by_algo in runs.values() for algo in study.algos)
+    text = [
+        f"<!-- Generated by {command(study)}: do not edit by hand. -->",
+        f"# {study.name}: {n_runs} of {len(study.algos) * len(study.envs) * len(study.seeds)} runs",
+        "",
+        f"Seeds {', '.join(map(str, study.seeds))}; 95% intervals; in brackets after each cell, the runs it averages.",
+        "",
+        *rule_lines(study, runs, scores, decision, lines),
+    ]
     text += ["", "## Final return (mean of the last evaluations)", "", *per_env_table(study, runs, scores, "final")]
     text += ["", "## AUC (mean evaluation return over training)", "", *per_env_table(study, runs, scores, "auc")]
     text += ["", "## Final return minus DQN's", "", *difference_table(study, scores)]
@@ -258,8 +368,11 @@ def report(study: Study, root: Path, out: Path) -> str:
         title = "AUC" if measure == "auc" else "final return"
         text += ["", f"## IQM of normalised {title} over the envs (algorithms with every run in)", ""]
         text += ["| algorithm | IQM |", "|---|---:|", *[f"| {label(algo)} | {interval(iqms[algo], '.3f')} |" for algo in iqms]]
-    low_high = ", ".join(f"{env} [{low:g}, {high:g}]" for env, (low, high) in study.normalisation.items())
-    text += ["", f"Normalisation (score - low) / (high - low), fixed before the runs: {low_high}."]
+    if study.normalisation == MINMAX:
+        text += ["", "Normalisation (score - low) / (high - low), low and high per env over every run of the study there."]
+    else:
+        low_high = ", ".join(f"{env} [{low:g}, {high:g}]" for env, (low, high) in study.normalisation.items())
+        text += ["", f"Normalisation (score - low) / (high - low), fixed before the runs: {low_high}."]
     (out / "table.md").write_text("\n".join(text) + "\n")
     plot_curves(study, runs, out)
     plot_aggregate(study, runs, scores, out)

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from helpers import SCRIPTS, load_script
 
-ALGOS = ["offon_dqn", "dqn"]
+ALGOS = ["offon_paper", "dqn"]
 SEEDS = [0, 1]
 ENV = "CartPole-v1"
 SECTION_44 = ["CartPoleFallPenalty-v1", "MountainCarGoalBonus-v0"]
@@ -219,10 +219,8 @@ def test_plot_writes_every_figure_and_table(local_root: Path, tmp_path: Path):
     # The Section 4.4 tasks, one seed, for Figures 13-16
     check(benchmark(local_root, "--envs", *SECTION_44, "--seeds", "1"))
     out = tmp_path / "figures"
-    page = tmp_path / "benchmarks.md"
-    page.write_text("# Title\n\n<!-- results:paper:start -->\nold tables\n<!-- results:paper:end -->\n\nAfter.\n")
     command = [sys.executable, str(SCRIPTS / "plot.py"), "--root", str(local_root), "--set", "paper", "--out", str(out)]
-    check(subprocess.run([*command, "--page", str(page)], capture_output=True, text=True, timeout=TIMEOUT))
+    check(subprocess.run(command, capture_output=True, text=True, timeout=TIMEOUT))
     expected = [f"curves_{env}.png" for env in [ENV, *SECTION_44]]
     expected += ["fall_penalty_average.png", "fall_penalty_best.png", "fall_penalty_worst.png", "goal_reaches.png"]
     expected += ["aggregate.png", "table.md"]
@@ -235,70 +233,37 @@ def test_plot_writes_every_figure_and_table(local_root: Path, tmp_path: Path):
             assert sum(f"| {env} (≥" in row and f"| {label} |" in row for row in rows) == 1, (env, label)
     assert "## Across environments (rliable)" in table and "P(improvement over DQN)" in table
     assert "## Section 4.4: CartPoleFallPenalty-v1" in table and "## Section 4.4: MountainCarGoalBonus-v0" in table
-    # --page: the page's block holds the same tables, the text around it is kept
-    text = page.read_text()
-    assert text.startswith("# Title\n\n<!-- results:paper:start -->\n")
-    assert text.endswith("<!-- results:paper:end -->\n\nAfter.\n")
-    assert "old tables" not in text and "**Section 4.4: MountainCarGoalBonus-v0**" in text
-    assert table_rows(text) == table_rows(table)
 
 
-def table_rows(text: str) -> list[str]:
-    """The table rows and the generated lines that say what the aggregate covers."""
-    return [line for line in text.splitlines() if line.startswith(("|", "Envs: "))]
+def test_a_study_file_gives_the_grid(tmp_path: Path):
+    """--study: the study's settings, algos, envs, seeds, evaluation and folder; --algos and --seeds narrow it; a
+    renamed algorithm (run_names) keeps its runs' folder."""
+    module = load_script("benchmark")
+    study = tmp_path / "toy.yml"
+    study.write_text(
+        "name: toy\nsettings: tuned\nfolder: toy_runs\nalgos: [dqn, offon_paper]\nenvs: [CartPole-v1, Acrobot-v1]\n"
+        "seeds: [40, 41]\nevaluation: {every: 500, episodes: 3}\nrun_names: {offon_paper: offon_dqn}\n"
+    )
+    specs = module.build_specs(module.parse_args(["--study", str(study)]))
+    assert {(spec["algo"], spec["env"], spec["seed"]) for spec in specs} == {
+        (algo, env, seed) for algo in ("dqn", "offon_paper") for env in ("CartPole-v1", "Acrobot-v1") for seed in (40, 41)
+    }
+    assert all(spec["grid"] == "toy_runs" and spec["set"] == "tuned" for spec in specs)
+    assert all(spec["eval_freq"] == 500 and spec["eval_episodes"] == 3 for spec in specs)
+    paper = next(spec for spec in specs if spec["algo"] == "offon_paper")
+    assert module.run_dir(tmp_path, paper) == tmp_path / "toy_runs" / "offon_dqn" / f"{paper['env']}_{paper['seed']}"
+    assert "--algo offon_paper" in " ".join(module.train_command(paper, "logs"))
+    narrowed = module.build_specs(module.parse_args(["--study", str(study), "--algos", "dqn", "--seeds", "41-41"]))
+    assert {(spec["algo"], spec["seed"]) for spec in narrowed} == {("dqn", 41)}
+    with pytest.raises(SystemExit):
+        module.parse_args(["--study", str(study), "--algos", "qrdqn"])  # not in the study
 
 
-def page_with_blocks(*blocks: str) -> str:
-    parts = ["# Project\n\nText before, with a [link](x.md).\n"]
-    for name, content in zip(("tuned", "paper"), blocks, strict=False):
-        block = f"<!-- results:{name}:start -->\n{content}\n<!-- results:{name}:end -->"
-        parts.append(f"\n## {name}\n\n{block}\n\nText after {name}.\n")
-    return "".join(parts)
-
-
-def test_plot_page_block_is_replaced_and_nothing_else(tmp_path: Path):
-    module = load_script("plot")
-    page = tmp_path / "benchmarks.md"
-    page.write_text(page_with_blocks("| old | tuned |\n\nmore old lines", "| paper | block |"))
-    module.replace_page_block(page, "tuned", "| new | tuned |")
-    expected = page_with_blocks("| new | tuned |\n", "| paper | block |")
-    assert page.read_text() == expected
-    # Again: the same file (the block's own blank line before the end marker does not pile up)
-    module.replace_page_block(page, "tuned", "| new | tuned |")
-    assert page.read_text() == expected
-
-
-def test_plot_page_without_markers_is_an_error_naming_the_marker(tmp_path: Path):
-    module = load_script("plot")
-    page = tmp_path / "benchmarks.md"
-    page.write_text("# Project\n\nNo markers.\n")
-    with pytest.raises(SystemExit, match="<!-- results:tuned:start --> is not found"):
-        module.replace_page_block(page, "tuned", "| new |")
-    page.write_text("# Project\n\n<!-- results:tuned:start -->\nno end marker\n")
-    with pytest.raises(SystemExit, match="<!-- results:tuned:end --> is not found"):
-        module.replace_page_block(page, "tuned", "| new |")
-    page.write_text(page_with_blocks("a", "b").replace("results:paper", "results:tuned"))
-    with pytest.raises(SystemExit, match="<!-- results:tuned:start --> is found 2 times"):
-        module.replace_page_block(page, "tuned", "| new |")
-    assert "| new |" not in page.read_text()
-    # The command checks the page before any work (--readme, the option's former name): nothing is written
-    page.write_text("# Project\n")
-    out = tmp_path / "out"
-    with pytest.raises(SystemExit, match="<!-- results:paper:start -->"):
-        module.main(["--root", str(tmp_path / "raw"), "--set", "paper", "--out", str(out), "--readme", str(page)])
-    assert not out.exists() and page.read_text() == "# Project\n"
-
-
-@pytest.mark.parametrize("hyperparams_set", ["paper", "tuned", "headtohead"])
-def test_plot_page_tables_are_the_results_tables(hyperparams_set: str):
-    # The documentation's results page shows the tables of results/<set>/table.md
-    # (python scripts/plot.py ... --page docs/benchmarks.md)
-    root = SCRIPTS.parent
-    text = (root / "docs" / "benchmarks.md").read_text()
-    start, end = f"<!-- results:{hyperparams_set}:start -->", f"<!-- results:{hyperparams_set}:end -->"
-    assert start in text and end in text
-    block = text.split(start)[1].split(end)[0]
-    assert table_rows(block) == table_rows((root / "results" / hyperparams_set / "table.md").read_text())
+def test_a_former_name_reads_its_new_names_file():
+    module = load_script("benchmark")
+    assert module.config_file("tuned", "offon_lambda_choice") == module.config_file("tuned", "offon_dqn")
+    assert module.config_file("tuned", "offon_lambda_choice").name == "offon_dqn.yml"
+    assert module.config_file("paper", "offon_paper").parent.name == "paper"
 
 
 def test_against_dqn_rows_from_hand_made_scores():

@@ -163,7 +163,8 @@ def test_saved_model_keeps_its_class_and_targets(runs: tuple[Path, dict], algo: 
     assert model.learning_starts == 100
     if algo != "dqn":
         # The variants' defaults do not override what was saved
-        expected = {"offon_dqn": (0.99, 0.99), "dqn_mc": (0.99, 1.0), "dqn_sarsa": (0.0, 0.99)}[algo]
+        # offon_dqn: OffOnDQN's defaults (lambda 0.9, Peng's); the paper's variants: their coin-flip schedules
+        expected = {"offon_dqn": (0.9, 0.0), "dqn_mc": (0.99, 1.0), "dqn_sarsa": (0.0, 0.99)}[algo]
         assert (model.mc_initial_prob, model.qlearning_initial_prob) == expected
         assert model._n_updates > 0
 
@@ -255,7 +256,7 @@ def test_optimize_shares_one_study(runs: tuple[Path, dict]) -> None:
     assert len(study.trials) == 3
     assert all(trial.state == optuna.trial.TrialState.COMPLETE for trial in study.trials)
     for trial in study.trials[1:]:
-        assert {"learning_rate", "mc_initial_prob", "qlearning_initial_prob", "mc_mixing", "sarsa_target", "loss"} <= set(
-            trial.params
-        )
+        # offon_dqn's sampler: the lambda and trace-cut schedules; mc_mixing stays "lambda", no Sarsa target to choose
+        assert {"learning_rate", "mc_initial_prob", "qlearning_initial_prob", "loss"} <= set(trial.params)
+        assert not {"mc_mixing", "sarsa_target"} & set(trial.params)
     assert list((folder / "tune" / "offon_dqn").glob("report_CartPole-v1_2-trials-300-tpe-median_*.csv"))

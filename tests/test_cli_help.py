@@ -25,7 +25,8 @@ def test_help_description_lists_every_registered_name() -> None:
         row = next(index for index, line in enumerate(lines) if line.split()[:1] == [name])
         assert lines[row + 1].strip() == summary
     assert set(ALGO_SUMMARIES) == set(ALGOS), "every name says what it trains"
-    assert "OffOnDQN's defaults" in ALGO_SUMMARIES["offon_lambda_choice"]
+    assert "OffOnDQN's defaults" in ALGO_SUMMARIES["offon_dqn"] and "PAPER_TARGETS" in ALGO_SUMMARIES["offon_paper"]
+    assert ALGO_SUMMARIES["offon_lambda_choice"] == "former name of offon_dqn"
     assert rows["offon_dqn"] == "sb3_offon.OffOnDQN" and rows["dqn_nstep"] == "stable_baselines3.DQN"
     assert "docs/offon_dqn.md" in text and "hyperparams" in text
     assert max(len(line) for line in text.splitlines()) <= 100

@@ -230,8 +230,13 @@ def test_without_dueling_the_policy_builds_sb3s_network() -> None:
 
 def test_dueling_model_saves_and_loads(tmp_path: Path) -> None:
     model = OffOnDQN(
-        "MlpPolicy", "CartPole-v1", policy_kwargs=dict(dueling=True, net_arch=[16]), double_q=True, learning_starts=50,
-        seed=0, device="cpu",
+        "MlpPolicy",
+        "CartPole-v1",
+        policy_kwargs=dict(dueling=True, net_arch=[16]),
+        double_q=True,
+        learning_starts=50,
+        seed=0,
+        device="cpu",
     )
     model.learn(200)
     obs = np.random.default_rng(0).normal(size=(8, 4)).astype(np.float32)
@@ -259,8 +264,17 @@ def test_dueling_model_saves_and_loads(tmp_path: Path) -> None:
 def test_dueling_and_double_q_train_with_every_policy(policy: str, make_env, mc_mixing: str) -> None:
     env = make_vec_env(make_env, n_envs=2, seed=0)
     model = OffOnDQN(
-        policy, env, policy_kwargs=dict(dueling=True), double_q=True, mc_mixing=mc_mixing, buffer_size=300,
-        learning_starts=50, batch_size=8, target_update_interval=40, seed=0, device="cpu",
+        policy,
+        env,
+        policy_kwargs=dict(dueling=True),
+        double_q=True,
+        mc_mixing=mc_mixing,
+        buffer_size=300,
+        learning_starts=50,
+        batch_size=8,
+        target_update_interval=40,
+        seed=0,
+        device="cpu",
     )
     before = [param.clone() for param in model.q_net.parameters()]
     model.learn(200)
@@ -274,8 +288,13 @@ def test_dueling_with_the_minatar_network() -> None:
     from sb3_offon import MinAtarCNN
 
     model = OffOnDQN(
-        "CnnPolicy", "MinAtar/Breakout-v1", policy_kwargs=dict(features_extractor_class=MinAtarCNN, net_arch=[], dueling=True),
-        learning_starts=50, buffer_size=200, seed=0, device="cpu",
+        "CnnPolicy",
+        "MinAtar/Breakout-v1",
+        policy_kwargs=dict(features_extractor_class=MinAtarCNN, net_arch=[], dueling=True),
+        learning_starts=50,
+        buffer_size=200,
+        seed=0,
+        device="cpu",
     )
     model.learn(120)
     assert isinstance(model.q_net.features_extractor, MinAtarCNN) and isinstance(model.q_net.q_net, DuelingHead)

@@ -19,24 +19,24 @@ from sb3_offon.callbacks import GoalCountCallback, StopOnMeanTrainingReward
 from sb3_offon.minatar_envs import minatar_ids
 from sb3_offon.offon_dqn.offon_dqn import OFFON_PARAMETERS
 from sb3_offon.variants import DQNMC, DQNSarsa
-from sb3_offon.zoo import ALGOS, HYPERPARAMS_DIR, SAMPLERS, register, resolve_config
+from sb3_offon.zoo import ALGOS, ALIASES, HYPERPARAMS_DIR, SAMPLERS, register, resolve_config
 
 register()
 
-PAPER_CLASSES = {"offon_dqn": OffOnDQN, "dqn_mc": DQNMC, "dqn_sarsa": DQNSarsa, "dqn": DQN}
-# The baselines of issue 13 have entries for the four benchmark tasks only
+PAPER_CLASSES = {"offon_paper": OffOnDQN, "dqn_mc": DQNMC, "dqn_sarsa": DQNSarsa, "dqn": DQN}
+# The head-to-heads' baselines (n-step DQN, QR-DQN) have entries for the four benchmark tasks only
 BASELINE_CLASSES = {"dqn_nstep": DQN, "qrdqn": QRDQN}
-# The configuration the search of issue 13 chose: the four tasks and the search's stochastic one
-CHOICE_CLASSES = {"offon_choice": OffOnDQN}
-# Issue 26: OffOnDQN with mc_mixing="lambda" on the same tasks
-LAMBDA_CLASSES = {"offon_lambda": OffOnDQN, "offon_lambda_choice": OffOnDQN}
+# The configuration the search chose on tuning seeds 0-4: the four tasks and the search's stochastic one
+CHOICE_CLASSES = {"offon_mc_decay": OffOnDQN}
+# The lambda-return mode: OffOnDQN with mc_mixing="lambda" on the same tasks
+LAMBDA_CLASSES = {"offon_watkins": OffOnDQN, "offon_dqn": OffOnDQN}
 CLASSES = {**PAPER_CLASSES, **BASELINE_CLASSES, **CHOICE_CLASSES, **LAMBDA_CLASSES}
 BASELINE_ENVS = {"default", "atari", "CartPole-v1", "MountainCar-v0", "LunarLander-v3", "Acrobot-v1"}
 CHOICE_ENVS = BASELINE_ENVS | {"FrozenLake-v1"}
 # The MinAtar games' entries (tests/test_minatar.py checks their values): in the files of the MinAtar head-to-head's
-# algorithms, and in offon_lambda.yml, which offon_lambda_choice.yml repeats entry for entry
+# algorithms, and in offon_watkins.yml, which offon_dqn.yml repeats entry for entry
 MINATAR_ENVS = set(minatar_ids())
-MINATAR_FILES = {"dqn", "dqn_nstep", "qrdqn", "offon_dqn", "offon_lambda", "offon_lambda_choice"}
+MINATAR_FILES = {"dqn", "dqn_nstep", "qrdqn", "offon_paper", "offon_watkins", "offon_dqn"}
 # The search's winner, `mc_sample` (results/search/README.md): the paper's delta1 schedule, no Sarsa, SB3's loss
 CHOICE_TARGETS = dict(
     mc_initial_prob=0.99,
@@ -88,7 +88,7 @@ def entries() -> list[tuple[str, str, str]]:
 @pytest.mark.parametrize("folder", [HYPERPARAMS_DIR, HYPERPARAMS_DIR / "paper"])
 def test_every_algorithm_has_its_entries(folder: Path) -> None:
     algos = CLASSES if folder == HYPERPARAMS_DIR else PAPER_CLASSES
-    assert sorted(path.stem for path in folder.glob("*.yml")) == sorted(algos)
+    assert sorted(path.stem for path in folder.glob("*.yml") if path.name != "aliases.yml") == sorted(algos)
     for algo in PAPER_CLASSES:
         assert set(load(folder / f"{algo}.yml")) >= (REQUIRED_ENVS if folder == HYPERPARAMS_DIR else PAPER_ENVS), algo
     if folder == HYPERPARAMS_DIR:
@@ -97,7 +97,7 @@ def test_every_algorithm_has_its_entries(folder: Path) -> None:
         for algo in CLASSES:
             has_minatar = MINATAR_ENVS <= set(load(folder / f"{algo}.yml"))
             assert has_minatar == (algo in MINATAR_FILES), algo
-        assert set(load(folder / "offon_choice.yml")) == CHOICE_ENVS
+        assert set(load(folder / "offon_mc_decay.yml")) == CHOICE_ENVS
 
 
 def test_baselines_are_the_zoo_settings() -> None:
@@ -126,7 +126,7 @@ def test_nstep_entries_are_the_search_choice() -> None:
     assert {env_id: entries[env_id]["n_steps"] for env_id in chosen} == chosen
 
 
-@pytest.mark.parametrize("algo", ["offon_dqn", "dqn_mc", "dqn_sarsa"])
+@pytest.mark.parametrize("algo", ["offon_paper", "dqn_mc", "dqn_sarsa"])
 def test_variants_share_the_dqn_settings(algo: str) -> None:
     """Apart from the target options, each entry is the `dqn` one: the comparison is like for like."""
     for folder in (HYPERPARAMS_DIR, HYPERPARAMS_DIR / "paper"):
@@ -136,49 +136,45 @@ def test_variants_share_the_dqn_settings(algo: str) -> None:
 
 
 def test_choice_is_the_search_winner_on_the_dqn_settings() -> None:
-    """`offon_choice`: every entry is the `dqn` one plus the winner's target settings, and nothing else."""
+    """`offon_mc_decay`: every entry is the `dqn` one plus the winner's target settings, and nothing else."""
     dqn = load(HYPERPARAMS_DIR / "dqn.yml")
-    for env_id, entry in load(HYPERPARAMS_DIR / "offon_choice.yml").items():
+    for env_id, entry in load(HYPERPARAMS_DIR / "offon_mc_decay.yml").items():
         assert {key: entry[key] for key in TARGET_KEYS & set(entry)} == CHOICE_TARGETS, env_id
         assert {key: value for key, value in entry.items() if key not in TARGET_KEYS} == dqn[env_id], env_id
 
 
 def test_lambda_file_is_the_dqn_settings_with_lambda_targets() -> None:
-    """`offon_lambda`: every entry is the `dqn` one plus lambda-return targets (lambda 0.9, Watkins), and nothing else."""
+    """`offon_watkins`: every entry is the `dqn` one plus lambda-return targets (lambda 0.9, Watkins), and nothing else."""
     dqn = load(HYPERPARAMS_DIR / "dqn.yml")
     lambda_targets = {**CHOICE_TARGETS, "mc_initial_prob": 0.9, "mc_final_prob": 0.9, "mc_mixing": "lambda"}
     lambda_targets.update(lambda_block_size=100, lambda_refresh_interval=None)
-    entries = load(HYPERPARAMS_DIR / "offon_lambda.yml")
+    entries = load(HYPERPARAMS_DIR / "offon_watkins.yml")
     assert set(entries) == CHOICE_ENVS | MINATAR_ENVS
     for env_id, entry in entries.items():
         assert {key: entry[key] for key in TARGET_KEYS & set(entry)} == lambda_targets, env_id
         assert {key: value for key, value in entry.items() if key not in TARGET_KEYS} == dqn[env_id], env_id
 
 
-def test_lambda_choice_is_offon_lambda_with_the_search_choice() -> None:
+def test_defaults_file_is_offon_watkins_with_the_search_choice() -> None:
     """
-    `offon_lambda_choice`: every entry is the `offon_lambda` one with the target settings of the candidate that the
-    search's report chose (results/search/summary.md, read as scripts/write_choice.py reads it), and nothing else.
+    `offon_dqn` (OffOnDQN's defaults): every entry is the `offon_watkins` one with the target settings of the candidate
+    that the search chose, `lambda90_peng_r5` (results/search/summary.md; its settings in scripts/search_candidates.py),
+    and nothing else.
     """
-    scripts = Path(__file__).parents[1] / "scripts"
-    spec = importlib.util.spec_from_file_location("write_choice_script", scripts / "write_choice.py")
-    write_choice = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(write_choice)
-    chosen = write_choice.chosen_candidate((Path(__file__).parents[1] / "results" / "search" / "summary.md").read_text())
-    assert chosen is not None, "offon_lambda_choice.yml exists, so a round of the search chose a candidate"
-    round_name, name = chosen
-    overrides = {}
-    for item in write_choice.search.BY_NAME[name].hyperparams:
-        key, value = item.split(":", 1)
-        overrides[key] = yaml.safe_load(value)
-    lambda_entries = load(HYPERPARAMS_DIR / "offon_lambda.yml")
-    choice_entries = load(HYPERPARAMS_DIR / "offon_lambda_choice.yml")
-    assert set(choice_entries) == set(lambda_entries)
-    for env_id, entry in choice_entries.items():
-        assert entry == {**lambda_entries[env_id], **overrides}, env_id
+    summary = (Path(__file__).parents[1] / "results" / "search" / "summary.md").read_text()
+    assert "**Choice** (the highest mean normalised AUC among those not shown below DQN): lambda90_peng_r5," in summary
+    spec = importlib.util.spec_from_file_location("candidates", Path(__file__).parents[1] / "scripts" / "search_candidates.py")
+    candidates = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(candidates)
+    (choice,) = [candidate for candidate in candidates.CANDIDATES if candidate.name == "lambda90_peng_r5"]
+    overrides = {key: yaml.safe_load(value) for key, value in (item.split(":", 1) for item in choice.hyperparams)}
+    watkins_entries = load(HYPERPARAMS_DIR / "offon_watkins.yml")
+    default_entries = load(HYPERPARAMS_DIR / "offon_dqn.yml")
+    assert set(default_entries) == set(watkins_entries)
+    for env_id, entry in default_entries.items():
+        assert entry == {**watkins_entries[env_id], **overrides}, env_id
         assert entry["mc_mixing"] == "lambda", env_id
-    header = (HYPERPARAMS_DIR / "offon_lambda_choice.yml").read_text()
-    assert f"`{name}`" in header and round_name.lower() in header
+    assert "`lambda90_peng_r5`" in (HYPERPARAMS_DIR / "offon_dqn.yml").read_text()
 
 
 def test_dqn_file_copies_the_zoo() -> None:
@@ -192,7 +188,10 @@ def test_dqn_file_copies_the_zoo() -> None:
 @pytest.mark.parametrize(
     "algo, expected",
     [
-        ("offon_dqn", dict(mc_initial_prob=0.99, mc_final_prob=0.01, qlearning_initial_prob=0.99, qlearning_final_prob=0.01)),
+        (
+            "offon_paper",
+            dict(mc_initial_prob=0.99, mc_final_prob=0.01, qlearning_initial_prob=0.99, qlearning_final_prob=0.01),
+        ),
         ("dqn_mc", dict(mc_initial_prob=0.99, mc_final_prob=0.01, qlearning_initial_prob=1.0, qlearning_final_prob=1.0)),
         ("dqn_sarsa", dict(mc_initial_prob=0.0, mc_final_prob=0.0, qlearning_initial_prob=0.99, qlearning_final_prob=0.01)),
     ],
@@ -217,6 +216,12 @@ def test_paper_settings() -> None:
 
 def test_resolve_config() -> None:
     assert resolve_config("offon_dqn", None) == str(HYPERPARAMS_DIR / "offon_dqn.yml")
+    # A former name reads its new name's file; the paper's configuration has the paper's settings too
+    assert resolve_config("offon_lambda_choice", None) == str(HYPERPARAMS_DIR / "offon_dqn.yml")
+    assert resolve_config("offon_choice", None) == str(HYPERPARAMS_DIR / "offon_mc_decay.yml")
+    assert resolve_config("offon_paper", "paper") == str(HYPERPARAMS_DIR / "paper" / "offon_paper.yml")
+    with pytest.raises(FileNotFoundError, match="offon_dqn"):
+        resolve_config("offon_dqn", "paper")
     # SB3's DQN reads our copy of the zoo's entries, any other zoo algorithm the zoo's own file
     assert resolve_config("dqn", None) == str(HYPERPARAMS_DIR / "dqn.yml")
     assert resolve_config("ppo", None) is None
@@ -283,7 +288,7 @@ def test_sampler(algo: str) -> None:
         if algo == "dqn_nstep":
             assert sampled["n_steps"] in (3, 5, 10)
             continue
-        if algo in LAMBDA_CLASSES:
+        if ALIASES.get(algo, algo) in LAMBDA_CLASSES:
             # lambda and delta2 schedules; mc_mixing stays the YAML's "lambda", and there is no Sarsa target to choose
             assert {"mc_initial_prob", "qlearning_initial_prob", "mc_truncation", "loss"} <= set(sampled)
             assert not {"mc_mixing", "sarsa_target"} & set(sampled)
@@ -295,9 +300,9 @@ def test_sampler(algo: str) -> None:
         has_mc = {"mc_initial_prob", "mc_final_prob", "mc_fraction", "mc_mixing", "mc_truncation"} <= set(sampled)
         has_sarsa = {"qlearning_initial_prob", "qlearning_final_prob", "qlearning_fraction", "sarsa_target"} <= set(sampled)
         # A variant's fixed probability is not sampled
-        expected = {"offon_dqn": (True, True), "dqn_mc": (True, False), "dqn_sarsa": (False, True)}
-        expected["offon_choice"] = expected["dqn_mc"]
-        assert (has_mc, has_sarsa) == expected[algo]
+        expected = {"offon_paper": (True, True), "dqn_mc": (True, False), "dqn_sarsa": (False, True)}
+        expected["offon_mc_decay"] = expected["dqn_mc"]
+        assert (has_mc, has_sarsa) == expected[ALIASES.get(algo, algo)]
         model = ALGOS[algo]("MlpPolicy", "CartPole-v1", device="cpu", **sampled)
         for key in TARGET_KEYS & set(sampled):
             assert getattr(model, key) == sampled[key]

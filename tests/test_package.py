@@ -12,7 +12,7 @@ import sb3_offon
 
 ROOT = Path(__file__).resolve().parents[1]
 TIMEOUT = 600
-# Issue 29: the README fits on a few screens; the rest is in docs/
+# The README fits on a few screens; the rest is in docs/
 README_MAX_BYTES = 12_000
 
 

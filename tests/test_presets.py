@@ -1,4 +1,4 @@
-"""OffOnDQN's defaults (issue 27's lambda-return choice), the paper's preset, and the ablations that keep the paper's."""
+"""OffOnDQN's defaults (the search's lambda-return choice), the paper's preset, and the ablations that keep the paper's."""
 
 import inspect
 
@@ -26,10 +26,10 @@ def test_offon_dqn_defaults_are_the_lambda_choice():
     assert (model.qlearning_initial_prob, model.qlearning_final_prob) == (0.0, 0.0)
 
 
-@pytest.mark.parametrize("preset, algo", [(LAMBDA_CHOICE_TARGETS, "offon_lambda_choice"), (PAPER_TARGETS, "offon_dqn")])
+@pytest.mark.parametrize("preset, algo", [(LAMBDA_CHOICE_TARGETS, "offon_dqn"), (PAPER_TARGETS, "offon_paper")])
 def test_presets_are_what_the_command_line_trains(preset, algo):
     """Every entry of the algorithm's YAML file writes out the preset's values (so the defaults cannot leak in)."""
-    # A schedule's fraction matters only where it moves (offon_lambda_choice.yml leaves qlearning_fraction out: 0 -> 0)
+    # A schedule's fraction matters only where it moves (offon_dqn.yml leaves qlearning_fraction out: 0 -> 0)
     needed = {
         key: value
         for key, value in preset.items()

@@ -1,13 +1,11 @@
-"""scripts/search.py and scripts/write_choice.py: the search's rounds, bars and verdicts, from hand-made scores."""
+"""scripts/search.py: the search's rounds, bars and verdicts, from hand-made scores."""
 
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
-from helpers import SCRIPTS, load_script
+from helpers import load_script
 
 
 def cell(name: str, table: list[str], column: int = -2) -> str:
@@ -149,7 +147,7 @@ def test_search_round3_cuts_ramp_over_each_tasks_exploration_period(tmp_path: Pa
     module = load_script("search")
     candidate = module.BY_NAME["lambda90_peng_to_watkins"]
     for env in module.OFFON_ENVS:
-        entry = yaml.safe_load((Path(__file__).parents[1] / "hyperparams" / "offon_lambda.yml").read_text())[env]
+        entry = yaml.safe_load((Path(__file__).parents[1] / "hyperparams" / "offon_watkins.yml").read_text())[env]
         (spec, root), *_ = module.specs_of(candidate, [env], [0], "cpu", tmp_path)
         assert spec["algo"] == "offon_lambda" and root == tmp_path / candidate.name
         assert spec["hyperparams"][-3:] == [
@@ -291,12 +289,10 @@ def test_search_round5_screen_from_hand_made_scores():
     assert point == 2.0 and 1.0 <= low < 2.0 < high <= 3.0
 
 
-def test_search_report_chooses_in_round5_and_write_choice_writes_it(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
-):
+def test_search_report_chooses_in_round5(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
     """From hand-made runs on seeds 30-34: `search.py report` chooses the fastest candidate not shown below DQN in round
-    5, and `write_choice.py` writes that candidate's settings from the summary."""
-    search, write_choice = load_script("search"), load_script("write_choice")
+    5."""
+    search = load_script("search")
     monkeypatch.chdir(Path(__file__).parents[1])  # earlier rounds read the tuned grid's committed runs
     root = tmp_path / "search"
 
@@ -322,75 +318,3 @@ def test_search_report_chooses_in_round5_and_write_choice_writes_it(
     round5 = summary.read_text().split("## Round 5")[1]
     assert "| lambda_paper_peng_r5 |" in round5 and "no: shown below on LunarLander-v3 |" in round5
     assert "**Choice** (the highest mean normalised AUC among those not shown below DQN): lambda90_peng_r5, 0.500," in round5
-    out = tmp_path / "offon_lambda_choice.yml"
-    assert write_choice.main(["--summary", str(summary), "--out", str(out)]) == 0
-    entries = yaml.safe_load(out.read_text())
-    expected = {"mc_initial_prob": 0.9, "mc_final_prob": 0.9, "qlearning_initial_prob": 0.0, "qlearning_final_prob": 0.0}
-    assert all({key: entry[key] for key in expected} == expected for entry in entries.values())
-    assert "lambda90_peng_r5" in capsys.readouterr().out
-
-
-def test_dqn_against_its_bar_is_the_table_of_the_search_readme():
-    """The README's table of DQN's own runs against the point rule's bars is what the script prints from the runs."""
-    root = Path(__file__).parents[1]
-    printed = subprocess.run(
-        [sys.executable, str(SCRIPTS / "dqn_against_its_bar.py")], cwd=root, capture_output=True, text=True, check=True
-    ).stdout
-    rows = [line for line in printed.splitlines() if line.startswith("| ")]
-    assert len(rows) == 1 + len(load_script("search").BENCHMARK_ENVS)
-    readme = (root / "results" / "search" / "README.md").read_text()
-    for row in rows:
-        assert row in readme, row
-
-
-def test_write_choice_writes_the_chosen_rounds_candidate(tmp_path: Path, capsys: pytest.CaptureFixture):
-    """offon_lambda_choice.yml: offon_lambda.yml's entries with the settings of the round that chose; none chose, none."""
-    module = load_script("write_choice")
-    choice_line = "**Choice** (the highest mean normalised AUC within the bar): lambda90_peng_half, 0.800, not above nstep10's"
-    summary = (
-        "# Searches\n\n## Off-On configurations\n\n**Winner** (highest mean normalised AUC among the eligible): max_paper\n\n"
-        "## Round 3: lambda-returns\n\n| a | b |\n\n**Choice: none** (no candidate within the bar)\n\n"
-        f"## Round 4: lambda-returns that end nearer one-step Q-learning\n\n| a | b |\n\n{choice_line}\n"
-    )
-    assert module.chosen_candidate(summary) == ("Round 4", "lambda90_peng_half")
-    no_choice = summary.replace(choice_line, "**Choice: pending** (2 of 3 candidates decided)")
-    assert module.chosen_candidate(no_choice) is None
-    (tmp_path / "summary.md").write_text(summary)
-    out = tmp_path / "offon_lambda_choice.yml"
-    assert module.main(["--summary", str(tmp_path / "summary.md"), "--out", str(out)]) == 0
-    lambda_entries = yaml.safe_load((Path(__file__).parents[1] / "hyperparams" / "offon_lambda.yml").read_text())
-    choice_entries = yaml.safe_load(out.read_text())
-    targets = {
-        "mc_initial_prob": 0.9,
-        "mc_final_prob": 0.0,
-        "mc_fraction": 0.5,
-        "qlearning_initial_prob": 0.0,
-        "qlearning_final_prob": 0.0,
-    }
-    assert set(choice_entries) == set(lambda_entries)
-    for env, entry in lambda_entries.items():
-        assert choice_entries[env] == {**entry, **targets}, env
-    assert "round 4 of the search" in out.read_text() and "`lambda90_peng_half`" in out.read_text()
-    assert "tuning seeds 0-4 (FrozenLake-v1: 0-9)" in " ".join(out.read_text().replace("#", " ").split())
-    out.unlink()
-    # A later round's choice wins; round 5's header says its seeds and its criterion
-    round5_line = (
-        "**Choice** (the highest mean normalised AUC among those not shown below DQN): lambda90_peng_r5, 0.810, "
-        "not above nstep10's 0.820 (seeds 0-4), above DQN's 0.500 (same seeds)"
-    )
-    (tmp_path / "summary.md").write_text(summary + f"\n## Round 5: on fresh tuning seeds\n\n| a | b |\n\n{round5_line}\n")
-    assert module.main(["--summary", str(tmp_path / "summary.md"), "--out", str(out)]) == 0
-    text = out.read_text()
-    assert "round 5 of the search" in text and "tuning seeds 30-34" in text and "bootstrap interval" in text
-    for env, entry in lambda_entries.items():
-        assert yaml.safe_load(text)[env] == {
-            **entry,
-            **targets,
-            "mc_initial_prob": 0.9,
-            "mc_final_prob": 0.9,
-            "mc_fraction": 1.0,
-        }
-    out.unlink()
-    (tmp_path / "summary.md").write_text(no_choice)
-    assert module.main(["--summary", str(tmp_path / "summary.md"), "--out", str(out)]) == 1 and not out.exists()
-    assert "nothing written" in capsys.readouterr().err

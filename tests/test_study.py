@@ -111,3 +111,110 @@ def test_the_minatar_study_file_reads() -> None:
     assert set(study.normalisation) == set(study.envs)
     assert all(low < high for low, high in study.normalisation.values())
     assert [criterion["kind"] for criterion in study.rule] == ["final_not_below", "iqm_above"]
+
+
+def test_final_within_and_auc_apart_above_from_hand_made_runs(tmp_path: Path) -> None:
+    """The first head-to-head's criteria: the bar (reference's mean final minus a share of the env's range) and the AUC
+    intervals apart above the reference's on at least k envs."""
+    study_module = load_script("study")
+    path, root = write_study(tmp_path, {"CartPole-v1": [10.0, 11.0, 12.0, 13.0], "Acrobot-v1": [2.3, 2.3, 2.3, 2.3]})
+    data = yaml.safe_load(path.read_text())
+    # Ranges 0-10: the bar is DQN's mean (2.5) minus 0.2 = 2.3 on both envs
+    data["ranges"] = {env: [0.0, 10.0] for env in ENVS}
+    data["rule"] = [
+        {"kind": "final_within", "reference": "dqn", "margin": 0.02},
+        {"kind": "auc_apart_above", "reference": "dqn", "at_least": 1},
+    ]
+    path.write_text(yaml.safe_dump(data))
+    study = study_module.Study.read(path)
+    decision, lines = study_module.verdict(study, *study_module.study_runs(study, root))
+    assert decision == "holds", lines
+    assert "CartPole-v1 11.5 against the bar 2.3 (DQN 2.5)" in lines[0] and "Acrobot-v1 2.3 against the bar 2.3" in lines[0]
+    # CartPole's AUC interval lies above DQN's; Acrobot's (2.3 on every seed) inside DQN's 1-4
+    cartpole, acrobot = lines[1].split("; ")[1:]
+    assert lines[1].startswith("holds:") and "on 1;" in lines[1]
+    assert cartpole.startswith("CartPole-v1 [1") and cartpole.endswith("(above, apart)")
+    assert acrobot.startswith("Acrobot-v1 [2.3, 2.3] against [") and acrobot.endswith("(overlapping)")
+    data["rule"][1]["at_least"] = 2
+    data["rule"][0]["margin"] = 0.019  # the bar 2.31: Acrobot-v1's 2.3 is below it
+    path.write_text(yaml.safe_dump(data))
+    decision, lines = study_module.verdict(study_module.Study.read(path), *study_module.study_runs(study, root))
+    assert decision == "does not hold"
+    assert lines[0].endswith("below on Acrobot-v1") and lines[1].startswith("does not hold: AUC interval")
+
+
+def test_minmax_normalisation_and_former_run_names(tmp_path: Path) -> None:
+    """``normalisation: minmax``: per env over every run of the study's algorithms (computed by hand here); runs made under
+    a former name (``run_names``) count as the study's algorithm."""
+    study_module = load_script("study")
+    path, root = write_study(tmp_path, {env: [3.0, 4.0, 5.0, 6.0] for env in ENVS})
+    (root / "toy" / "offon_lambda_choice").rename(root / "toy" / "old_name")
+    for marker in (root / "toy" / "old_name").glob("*/done.json"):
+        record = json.loads(marker.read_text())
+        record["spec"]["algo"] = "old_name"
+        marker.write_text(json.dumps(record))
+    data = yaml.safe_load(path.read_text())
+    data.update(normalisation="minmax", run_names={"offon_lambda_choice": "old_name"})
+    path.write_text(yaml.safe_dump(data))
+    study = study_module.Study.read(path)
+    runs, scores = study_module.study_runs(study, root)
+    assert [run.seed for run in runs["CartPole-v1"]["offon_lambda_choice"]] == SEEDS
+    # Every env: scores 1..6 over both algorithms -> (x - 1) / 5; the candidate's 3, 3, 4, 4, 5, 5, 6, 6 -> middle half
+    # 4, 4, 5, 5 -> (4.5 - 1) / 5 = 0.7; DQN's 1, 1, 2, 2, 3, 3, 4, 4 -> (2.5 - 1) / 5 = 0.3
+    iqms = study_module.iqm_intervals(study, runs, scores, "auc")
+    assert iqms["offon_lambda_choice"][0] == pytest.approx(0.7) and iqms["dqn"][0] == pytest.approx(0.3)
+    report = study_module.report(study, root, tmp_path / "report")
+    assert report == "holds" and "over every run of the study there" in (tmp_path / "report" / "table.md").read_text()
+
+
+def test_interval_estimates_do_not_depend_on_the_other_algorithms() -> None:
+    """An algorithm's interval is drawn from its own seeded resamples, whatever else is estimated with it."""
+    run_stats = load_script("run_stats")
+    rng = np.random.default_rng(0)
+    ours, other = rng.random((10, 4)), rng.random((10, 4))
+
+    def iqm(scores: np.ndarray) -> np.ndarray:
+        return np.array([run_stats.metrics.aggregate_iqm(scores)])
+
+    alone = run_stats.interval_estimates({"ours": ours}, iqm, 200)
+    together = run_stats.interval_estimates({"other": other, "ours": ours}, iqm, 200)
+    np.testing.assert_array_equal(alone[1]["ours"], together[1]["ours"])
+    assert alone[0]["ours"] == together[0]["ours"]
+
+
+# The committed studies: the reporter writes each committed table.md (and verdict.md) again from the committed runs
+COMMITTED = ["paper", "tuned", "headtohead", "headtohead2"]
+
+
+@pytest.mark.parametrize("name", COMMITTED)
+def test_the_reporter_reproduces_the_committed_report(tmp_path: Path, name: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    study_module = load_script("study")
+    root = Path(__file__).parents[1]
+    monkeypatch.chdir(root)  # the study file's path as the committed report names it: benchmarks/<name>.yml
+    study = study_module.Study.read(Path("benchmarks") / f"{name}.yml")
+    study_module.report(study, Path("results") / "raw", tmp_path)
+    for generated in ("table.md", "verdict.md"):
+        committed = root / "results" / name / generated
+        if committed.is_file() or (tmp_path / generated).is_file():
+            assert (tmp_path / generated).read_text() == committed.read_text(), generated
+
+
+def test_the_published_verdicts() -> None:
+    """The head-to-heads' verdicts and the figures their reports quote, from the committed runs."""
+    study_module = load_script("study")
+    benchmarks, raw = Path(__file__).parents[1] / "benchmarks", Path(__file__).parents[1] / "results" / "raw"
+    first = study_module.Study.read(benchmarks / "headtohead.yml")
+    decision, lines = study_module.verdict(first, *study_module.study_runs(first, raw))
+    assert decision == "does not hold"
+    for quoted in (
+        "CartPole-v1 410.2 against the bar 338.1 (DQN 348.1)",
+        "LunarLander-v3 148.2 against the bar 169.7 (DQN 179.7)",
+        "Acrobot-v1 -86.4 against the bar -85.8 (DQN -77.0)",
+    ):
+        assert quoted in lines[0]
+    assert "on 2;" in lines[1] and "CartPole-v1 [421.9, 464.7] against [222.7, 263.8] (above, apart)" in lines[1]
+    second = study_module.Study.read(benchmarks / "headtohead2.yml")
+    decision, lines = study_module.verdict(second, *study_module.study_runs(second, raw))
+    assert decision == "holds"
+    assert lines[0].endswith("holds on every env")
+    assert "0.865 [0.828, 0.898] against 0.803 [0.758, 0.847]" in lines[1]

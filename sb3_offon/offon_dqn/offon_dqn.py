@@ -74,9 +74,9 @@ class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, ChunkedMinibatchesMixi
     Defaults: the lambda-return mode below (``mc_mixing="lambda"``) with lambda = 0.9 throughout training and Peng's
     Q(lambda) (delta2 = 0, no trace cuts): the configuration that a search on tuning seeds chose and that a
     head-to-head on fresh seeds 20-29 found not below DQN's final return on any of four tasks and with a normalised
-    area under the learning curve above n-step DQN's across them (issue 27, ``results/headtohead2/README.md``). The
-    paper's configuration, described first below, is one argument set away:
-    ``OffOnDQN(policy, env, **sb3_offon.PAPER_TARGETS)`` (``--algo offon_dqn`` on the command line).
+    area under the learning curve above n-step DQN's across them (``results/headtohead2/README.md``). The paper's
+    configuration, described first below, is one argument set away:
+    ``OffOnDQN(policy, env, **sb3_offon.PAPER_TARGETS)`` (``--algo offon_paper`` on the command line).
 
     With probability delta1 (``mc_*``), and when the return G_t of the transition's episode is known, the target is
     G_t. Otherwise it is a TD target: Q-learning, y = r + gamma * (1 - d) * max_a Q_target(s', a), with probability
