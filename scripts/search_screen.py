@@ -1,5 +1,5 @@
 """
-Round 5's screen (issue 27): a candidate passes a task unless its final return is *shown* to be more than the tolerance
+The search's screen (its fifth round, on tuning seeds 30-34): a candidate passes a task unless its final return is *shown* to be more than the tolerance
 below DQN's, that is unless the whole 95% bootstrap interval of the difference of the mean final returns (candidate
 minus DQN, each side's seeds resampled apart, ``run_stats.two_sample_ci``) lies below minus the tolerance (2% of the
 task's range, rounds 1-4's bar).
