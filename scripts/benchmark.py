@@ -165,7 +165,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--force", action="store_true", help="redo finished runs that were made with other settings")
     parser.add_argument("--dry-run", action="store_true", help="list the runs and their commands, run nothing")
     args = parser.parse_args(argv)
-    args.run_names = {}
+    args.run_names, args.candidates = {}, {}
     if args.study is not None:
         from_study(args, parser)
     args.algos = args.algos or ALGOS
@@ -179,7 +179,7 @@ def from_study(args: argparse.Namespace, parser: argparse.ArgumentParser) -> Non
     """The grid of a study file (``scripts/study.py`` reads the same file), narrowed by --algos, --envs and --seeds."""
     study = yaml.safe_load(args.study.read_text())
     for option, key, given, listed in (
-        ("--algos", "algos", args.algos, study["algos"]),
+        ("--algos", "algos", args.algos, list(study.get("candidates", {})) or study["algos"]),
         ("--envs", "envs", args.envs, study["envs"]),
         ("--seeds", "seeds", parse_seeds(args.seeds) if args.seeds else None, study["seeds"]),
     ):
@@ -187,13 +187,16 @@ def from_study(args: argparse.Namespace, parser: argparse.ArgumentParser) -> Non
             parser.error(f"{option} {' '.join(map(str, given))}: not in the study's {key} {listed}")
     args.set = study.get("settings", "tuned")
     args.name = study.get("folder", study["name"])
-    args.algos = args.algos or list(study["algos"])
+    args.algos = args.algos or list(study.get("candidates", {})) or list(study["algos"])
     args.envs = args.envs or list(study["envs"])
     args.seeds = args.seeds or [f"{seed}-{seed}" for seed in study["seeds"]]
     evaluation = study.get("evaluation", {})
     args.eval_freq = args.eval_freq or evaluation.get("every")
     args.eval_episodes = evaluation.get("episodes", args.eval_episodes)
     args.run_names = dict(study.get("run_names", {}))
+    args.candidates = dict(study.get("candidates", {}))
+    args.seeds_on = dict(study.get("seeds_on", {}))
+    args.episodes_on = dict(evaluation.get("episodes_on", {}))
 
 
 # ----------------------------------------------------------------------------------------------------------------------
@@ -249,6 +252,29 @@ def build_specs(args: argparse.Namespace) -> list[dict]:
                         "timeout": args.timeout,
                     }
                 )
+    return specs
+
+
+def candidate_specs(args: argparse.Namespace) -> list[dict]:
+    """
+    The runs of a study that chooses among candidates (``--study`` with ``candidates``; ``--algos`` names candidates):
+    each candidate's algorithm with its settings (``hyperparams``, ``per_env``), on its envs and seeds, into its folder.
+    """
+    specs = []
+    for name in args.algos:
+        candidate = args.candidates[name]
+        for env in candidate.get("envs", args.envs):
+            if env not in args.envs:
+                continue
+            seeds = candidate.get("seeds") or args.seeds_on.get(env) or args.seeds
+            one = argparse.Namespace(**vars(args))
+            one.algos, one.envs = [candidate["algo"]], [env]
+            one.seeds = [int(seed) for seed in seeds]
+            one.hyperparams = [*candidate.get("hyperparams", []), *candidate.get("per_env", {}).get(env, [])]
+            one.name = candidate.get("folder_on", {}).get(env, candidate.get("folder", args.name))
+            one.eval_episodes = args.episodes_on.get(env, args.eval_episodes)
+            one.run_names = {candidate["algo"]: candidate["run_name"]} if "run_name" in candidate else {}
+            specs += build_specs(one)
     return specs
 
 
@@ -508,7 +534,7 @@ def run_ray(specs: list[dict], workers: int, address: str | None) -> Iterator[di
 # ----------------------------------------------------------------------------------------------------------------------
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    specs = build_specs(args)
+    specs = candidate_specs(args) if args.candidates else build_specs(args)
     statuses = {id(spec): run_status(run_dir(args.root, spec), spec) for spec in specs}
     conflicts = [spec for spec in specs if statuses[id(spec)] == "conflict"]
     if conflicts and not args.force:
@@ -522,9 +548,11 @@ def main(argv: list[str] | None = None) -> int:
     todo = [spec for spec in specs if statuses[id(spec)] != "finished"]
     todo = run_order(todo)
     print(
-        f"{len(specs)} runs ({len(args.algos)} algos x {len(args.envs)} envs x {len(args.seeds)} seeds "
+        f"{len(specs)} runs ({len(args.algos)} {'candidates' if args.candidates else 'algos'} x {len(args.envs)} envs x "
+        f"{len(args.seeds)} seeds "
         f"({seeds_text(args.seeds)}), '{args.set}' set) "
-        f"in {args.root / (args.name or args.set)}: {len(specs) - len(todo)} finished, {len(todo)} to run"
+        f"in {args.root / (args.name or args.set) if not args.candidates else args.root}: "
+        f"{len(specs) - len(todo)} finished, {len(todo)} to run"
         + (f" on Ray ({args.ray_address or f'local, {args.workers} CPUs'})" if args.ray else f" on {args.workers} workers")
     )
     if args.dry_run:

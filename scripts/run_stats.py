@@ -1,5 +1,5 @@
 """
-The runs of a benchmark and their statistics, shared by ``scripts/plot.py``, ``scripts/study.py`` and ``scripts/search.py``.
+The runs of a benchmark and their statistics, shared by ``scripts/plot.py``, ``scripts/study.py`` and ``scripts/selection.py``.
 
 - Loading: every finished run (``done.json``) under ``<root>/<set>/<algo>/<env>_<seed>/``, with its evaluation curve
   and its training episodes (the monitor CSVs);

@@ -94,6 +94,29 @@ class Study:
     run_names: dict[str, str] = field(default_factory=dict)
     ranges: dict[str, tuple[float, float]] = field(default_factory=dict)
     tables: str = "study"
+    # A study that chooses among candidates (scripts/selection.py): each with its algorithm, settings and runs' folder
+    candidates: dict[str, dict] = field(default_factory=dict)
+    judged: list[str] = field(default_factory=list)
+    choose: dict | None = None
+    seeds_on: dict[str, list[int]] = field(default_factory=dict)
+    ceilings: dict[str, float] = field(default_factory=dict)
+    out: str = ""
+
+    def seeds_for(self, algo: str, env: str) -> list[int]:
+        """The seeds ``algo`` is judged on on ``env``: its candidate's own, else the env's (``seeds_on``), else the study's."""
+        own = self.candidates.get(algo, {}).get("seeds")
+        return [int(seed) for seed in own] if own else self.seeds_on.get(env, self.seeds)
+
+    def envs_for(self, algo: str) -> list[str]:
+        return list(self.candidates.get(algo, {}).get("envs", self.envs))
+
+    def source(self, algo: str, env: str) -> tuple[str, str]:
+        """The folder (under the results root) and the algorithm name of ``algo``'s runs on ``env``."""
+        candidate = self.candidates.get(algo)
+        if candidate is None:
+            return self.folder, self.run_names.get(algo, algo)
+        folder = candidate.get("folder_on", {}).get(env, candidate.get("folder", self.folder))
+        return folder, candidate.get("run_name", candidate["algo"])
 
     @classmethod
     def read(cls, path: Path) -> "Study":
@@ -102,11 +125,13 @@ class Study:
         normalisation = data.get("normalisation", MINMAX)
         if normalisation != MINMAX:
             normalisation = {env: (float(low), float(high)) for env, (low, high) in normalisation.items()}
+        candidates = dict(data.get("candidates", {}))
+        ranges = data.get("ranges", normalisation if normalisation != MINMAX else {})
         study = cls(
             path=path,
             name=data["name"],
             question=" ".join(data["question"].split()),
-            algos=list(data["algos"]),
+            algos=list(candidates) or list(data["algos"]),
             envs=list(data["envs"]),
             seeds=[int(seed) for seed in data["seeds"]],
             normalisation=normalisation,
@@ -120,12 +145,18 @@ class Study:
             stated=str(data.get("stated", "")),
             folder=str(data.get("folder", data["name"])),
             run_names=dict(data.get("run_names", {})),
-            ranges={env: (float(low), float(high)) for env, (low, high) in data.get("ranges", {}).items()},
+            ranges={env: (float(low), float(high)) for env, (low, high) in ranges.items()},
             tables=str(data.get("tables", "study")),
+            candidates=candidates,
+            judged=list(data.get("judged", [name for name in candidates if name not in data.get("references", [])])),
+            choose=data.get("choose"),
+            seeds_on={env: [int(seed) for seed in seeds] for env, seeds in data.get("seeds_on", {}).items()},
+            ceilings={env: float(value) for env, value in data.get("ceilings", {}).items()},
+            out=str(data.get("out", "")),
         )
         if study.tables not in ("study", "benchmark"):
             raise ValueError(f"{path}: tables must be 'study' or 'benchmark', not {study.tables!r}")
-        if study.rule and study.candidate not in study.algos:
+        if study.rule and not study.candidates and study.candidate not in study.algos:
             raise ValueError(f"{path}: the candidate {study.candidate!r} is not one of the algos {study.algos}")
         return study
 
@@ -138,15 +169,20 @@ def study_runs(study: Study, root: Path) -> tuple[dict[str, dict[str, list[Run]]
     ``runs[env][algo]`` and ``scores[env][algo]`` (final, auc, steps, solved: one per run, by seed) of the study's
     finished runs, under the study's names for its algorithms; envs sorted, algorithms in ``run_stats``' table order.
     """
-    folder = root / study.folder
-    loaded = load_runs(folder) if folder.is_dir() else {}
+    loaded: dict[str, dict] = {}
     runs: dict[str, dict[str, list[Run]]] = {}
     scores: dict[str, dict[str, dict]] = {}
     for env in sorted(study.envs):
-        for algo in sorted(study.algos, key=algo_order):
+        for algo in sorted(study.algos, key=algo_order) if not study.candidates else study.algos:
+            if env not in study.envs_for(algo):
+                continue
+            folder, on_disk = study.source(algo, env)
+            if folder not in loaded:
+                loaded[folder] = load_runs(root / folder) if (root / folder).is_dir() else {}
             # Runs made under the algorithm's former name (``run_names``) and under its own
-            names = dict.fromkeys([study.run_names.get(algo, algo), algo])
-            found = [run for name in names for run in loaded.get(env, {}).get(name, []) if run.seed in study.seeds]
+            names = dict.fromkeys([on_disk, algo])
+            seeds = study.seeds_for(algo, env)
+            found = [run for name in names for run in loaded[folder].get(env, {}).get(name, []) if run.seed in seeds]
             kept = sorted((replace(run, algo=algo) for run in found), key=lambda run: run.seed)
             if kept:
                 grid, curves = evaluation_curves(kept)
@@ -155,15 +191,20 @@ def study_runs(study: Study, root: Path) -> tuple[dict[str, dict[str, list[Run]]
     return runs, scores
 
 
+def complete(study: Study, runs: dict, env: str, algo: str) -> bool:
+    """Whether every seed of ``algo`` on ``env`` has its finished run."""
+    return len(runs.get(env, {}).get(algo, [])) == len(study.seeds_for(algo, env))
+
+
 def missing_runs(study: Study, runs: dict) -> int:
-    expected = len(study.algos) * len(study.envs) * len(study.seeds)
+    expected = sum(len(study.seeds_for(algo, env)) for algo in study.algos for env in study.envs_for(algo))
     return expected - sum(len(by_algo.get(algo, [])) for by_algo in runs.values() for algo in study.algos)
 
 
 def normalised(study: Study, runs: dict, scores: dict, algo: str, measure: str) -> np.ndarray | None:
     """(seeds, envs) of normalised scores, envs sorted (the order every caller gives rliable); None if a run is missing."""
     envs = sorted(study.envs)
-    if any(len(runs.get(env, {}).get(algo, [])) != len(study.seeds) for env in envs):
+    if not all(complete(study, runs, env, algo) for env in envs):
         return None
     if study.normalisation == MINMAX:
         # Per env over every run of the study's algorithms there: only once every algorithm's runs are in
@@ -201,16 +242,9 @@ def final_difference(study: Study, scores: dict, env: str, algo: str, reference:
 def judge_criterion(study: Study, runs: dict, scores: dict, criterion: dict, algo: str) -> tuple[bool | None, str]:
     """Whether one criterion holds for ``algo`` (None: runs missing), and a line that says why."""
     kind, reference = criterion["kind"], criterion["reference"]
+    envs = list(criterion.get("envs", study.envs))
     if kind == "final_not_below":
-        below = []
-        for env in study.envs:
-            difference = final_difference(study, scores, env, algo, reference)
-            if difference is None or len(runs[env][algo]) != len(study.seeds) or len(runs[env][reference]) != len(study.seeds):
-                return None, f"final return not below {label(reference)}'s on any env: runs missing on {env}"
-            if difference[2] < 0:
-                below.append(f"{env} ({difference[0]:+.2f} [{difference[1]:+.2f}, {difference[2]:+.2f}])")
-        text = f"final return not below {label(reference)}'s on any env by the interval of the difference"
-        return not below, f"{text}: {'below on ' + ', '.join(below) if below else 'holds on every env'}"
+        return final_not_below(study, runs, scores, algo, reference, float(criterion.get("margin", 0.0)), envs)
     if kind == "iqm_above":
         measure = criterion["measure"]
         iqms = iqm_intervals(study, runs, scores, measure)
@@ -223,31 +257,92 @@ def judge_criterion(study: Study, runs: dict, scores: dict, criterion: dict, alg
             f"{theirs[0]:.3f} [{theirs[1]:.3f}, {theirs[2]:.3f}]"
         )
     if kind == "final_within":
-        return final_within(study, runs, scores, algo, reference, float(criterion["margin"]))
+        return final_within(study, runs, scores, algo, reference, float(criterion["margin"]), envs)
+    if kind == "mean_above":
+        return mean_above(study, runs, scores, algo, reference, criterion.get("measure", "auc"), envs)
     if kind == "auc_apart_above":
         return auc_apart_above(study, runs, scores, algo, reference, int(criterion["at_least"]))
     raise ValueError(f"unknown criterion kind {kind!r} in the rule")
 
 
 def complete_pair(study: Study, runs: dict, env: str, algo: str, reference: str) -> bool:
-    by_algo = runs.get(env, {})
-    return all(len(by_algo.get(name, [])) == len(study.seeds) for name in (algo, reference))
+    return complete(study, runs, env, algo) and complete(study, runs, env, reference)
 
 
-def final_within(study: Study, runs: dict, scores: dict, algo: str, reference: str, margin: float) -> tuple[bool | None, str]:
-    """On every env, ``algo``'s mean final return at least the reference's minus ``margin`` times the env's range."""
+def final_not_below(
+    study: Study, runs: dict, scores: dict, algo: str, reference: str, margin: float, envs: list[str]
+) -> tuple[bool | None, str]:
+    """On every env, the upper bound of the interval of (``algo`` - reference) mean final return at least minus
+    ``margin`` times the env's range (0: not below zero)."""
+    text = f"final return not below {label(reference)}'s on any env by the interval of the difference"
+    if margin:
+        text += f" by more than {margin:g} of the env's range"
+    below, cells = [], []
+    for env in envs:
+        difference = final_difference(study, scores, env, algo, reference)
+        if difference is None or not complete_pair(study, runs, env, algo, reference):
+            return None, f"{text}: runs missing on {env}"
+        cells.append(f"{env} {interval(difference, '+.3g')}")
+        low, high = study.ranges.get(env, (0.0, 0.0))
+        if difference[2] < -margin * (high - low):
+            below.append(f"{env} ({difference[0]:+.2f} [{difference[1]:+.2f}, {difference[2]:+.2f}])")
+    if margin:
+        text += f" ({'; '.join(cells)})"
+    return not below, f"{text}: {'below on ' + ', '.join(below) if below else 'holds on every env'}"
+
+
+def final_within(
+    study: Study, runs: dict, scores: dict, algo: str, reference: str, margin: float, envs: list[str]
+) -> tuple[bool | None, str]:
+    """
+    On every env, ``algo``'s mean final return at least the reference's minus ``margin`` times the env's range. With
+    runs missing, an env fails already where the mean would stay below the bar even if every missing run ended at the
+    env's ceiling (``ceilings``: the highest return an episode can have there); otherwise it waits.
+    """
     text = f"final return at least {label(reference)}'s minus {margin:g} of the env's range on every env"
-    below, bars = [], []
-    for env in study.envs:
-        if not complete_pair(study, runs, env, algo, reference):
+    below, bars, waiting = [], [], []
+    for env in envs:
+        if not complete(study, runs, env, reference):
             return None, f"{text}: runs missing on {env}"
         low, high = study.ranges[env]
         theirs = float(np.mean(scores[env][reference]["final"]))
-        bar, ours = theirs - margin * (high - low), float(np.mean(scores[env][algo]["final"]))
+        bar = theirs - margin * (high - low)
+        finals = scores.get(env, {}).get(algo, {}).get("final", np.zeros(0))
+        missing = len(study.seeds_for(algo, env)) - len(finals)
+        if missing and env not in study.ceilings:
+            waiting.append(env)
+            continue
+        best = (finals.sum() + missing * study.ceilings.get(env, 0.0)) / len(study.seeds_for(algo, env))
+        ours = float(np.mean(finals)) if len(finals) else np.nan
         bars.append(f"{env} {ours:.1f} against the bar {bar:.1f} ({label(reference)} {theirs:.1f})")
-        if ours < bar:
-            below.append(env)
-    return not below, f"{text}: {'; '.join(bars)}" + (f"; below on {', '.join(below)}" if below else "")
+        if best < bar:
+            below.append(env + (f" (out of reach with {missing} runs missing)" if missing else ""))
+        elif missing:
+            waiting.append(env)
+    line = f"{text}: {'; '.join(bars)}" + (f"; below on {', '.join(below)}" if below else "")
+    if below:
+        return False, line
+    return (None, f"{line}; runs missing on {', '.join(waiting)}") if waiting else (True, line)
+
+
+def mean_above(
+    study: Study, runs: dict, scores: dict, algo: str, reference: str, measure: str, envs: list[str]
+) -> tuple[bool | None, str]:
+    """``algo``'s mean over ``envs`` of its normalised mean ``measure`` above the reference's."""
+    text = f"mean normalised {measure.upper() if measure == 'auc' else measure} above {label(reference)}'s"
+    if not all(complete(study, runs, env, name) for env in envs for name in (algo, reference)):
+        return None, f"{text}: runs missing"
+    ours, theirs = (mean_normalised(study, scores, name, measure, envs) for name in (algo, reference))
+    return ours > theirs, f"{text}: {ours:.3f} against {theirs:.3f}"
+
+
+def mean_normalised(study: Study, scores: dict, algo: str, measure: str, envs: list[str]) -> float:
+    """The mean over ``envs`` of ``algo``'s mean ``measure`` there, normalised with the study's fixed ranges."""
+    values = []
+    for env in envs:
+        low, high = study.ranges[env]
+        values.append((float(np.mean(scores[env][algo][measure])) - low) / (high - low))
+    return float(np.mean(values))
 
 
 def auc_apart_above(
@@ -339,6 +434,10 @@ def rule_lines(study: Study, runs: dict, scores: dict, decision: str, lines: lis
 def report(study: Study, root: Path, out: Path) -> str:
     """Write the study's tables, figures and verdict into ``out``; return the verdict."""
     runs, scores = study_runs(study, root)
+    if study.candidates:
+        import selection  # a study that chooses among candidates (selection.py imports this module)
+
+        return selection.report(study, runs, scores, out, command(study))
     out.mkdir(parents=True, exist_ok=True)
     decision, lines = verdict(study, runs, scores)
     if study.tables == "benchmark":
@@ -466,7 +565,7 @@ def main(argv: list[str] | None = None) -> str:
         outcome = "passed" if passed else f"incomplete ({missing} runs missing)" if missing else "FAILED"
         print(f"Setup check: {outcome}")
         return "passed" if passed else "failed"
-    decision = report(study, args.root, args.out or Path("results") / study.name)
+    decision = report(study, args.root, args.out or Path(study.out or Path("results") / study.name))
     print(f"{study.name}: {decision}")
     return decision
 

@@ -114,13 +114,13 @@ def test_baselines_are_the_zoo_settings() -> None:
 
 
 def test_nstep_entries_are_the_search_choice() -> None:
-    """Each benchmark task's n_steps is the one the search's summary chose (python scripts/search.py report)."""
-    summary = (Path(__file__).parents[1] / "results" / "search" / "summary.md").read_text()
+    """Each benchmark task's n_steps is the one the search chose (python scripts/study.py benchmarks/search_nstep.yml)."""
+    report = (Path(__file__).parents[1] / "results" / "search" / "search_nstep.md").read_text()
     chosen = {}
-    for row in summary.split("## n-step DQN")[1].splitlines():
+    for row in report.splitlines():
         cells = [cell.strip() for cell in row.strip("|").split("|")]
         if cells[0] in BASELINE_ENVS:
-            chosen[cells[0]] = int(cells[-1])
+            chosen[cells[0]] = int(cells[-1].removeprefix("nstep"))
     entries = load(HYPERPARAMS_DIR / "dqn_nstep.yml")
     assert set(chosen) == BASELINE_ENVS - {"default", "atari"}
     assert {env_id: entries[env_id]["n_steps"] for env_id in chosen} == chosen
@@ -158,16 +158,15 @@ def test_lambda_file_is_the_dqn_settings_with_lambda_targets() -> None:
 def test_defaults_file_is_offon_watkins_with_the_search_choice() -> None:
     """
     `offon_dqn` (OffOnDQN's defaults): every entry is the `offon_watkins` one with the target settings of the candidate
-    that the search chose, `lambda90_peng_r5` (results/search/summary.md; its settings in scripts/search_candidates.py),
-    and nothing else.
+    that the search chose, `lambda90_peng_r5` (results/search/search_screen.md; its settings in
+    benchmarks/search_screen.yml), and nothing else.
     """
-    summary = (Path(__file__).parents[1] / "results" / "search" / "summary.md").read_text()
-    assert "**Choice** (the highest mean normalised AUC among those not shown below DQN): lambda90_peng_r5," in summary
-    spec = importlib.util.spec_from_file_location("candidates", Path(__file__).parents[1] / "scripts" / "search_candidates.py")
-    candidates = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(candidates)
-    (choice,) = [candidate for candidate in candidates.CANDIDATES if candidate.name == "lambda90_peng_r5"]
-    overrides = {key: yaml.safe_load(value) for key, value in (item.split(":", 1) for item in choice.hyperparams)}
+    root = Path(__file__).parents[1]
+    report = (root / "results" / "search" / "search_screen.md").read_text()
+    assert "**Choice: lambda90_peng_r5, " in report
+    study = yaml.safe_load((root / "benchmarks" / "search_screen.yml").read_text())
+    choice = study["candidates"]["lambda90_peng_r5"]
+    overrides = {key: yaml.safe_load(value) for key, value in (item.split(":", 1) for item in choice["hyperparams"])}
     watkins_entries = load(HYPERPARAMS_DIR / "offon_watkins.yml")
     default_entries = load(HYPERPARAMS_DIR / "offon_dqn.yml")
     assert set(default_entries) == set(watkins_entries)
