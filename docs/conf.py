@@ -81,7 +81,9 @@ def relink(app, docname: str, source: list[str]) -> None:  # type: ignore[no-unt
     if docname.startswith("results/"):
         text = text.replace("](../../docs/", "](../../")
         # The per-run speed tables open with a line of text, not a title: the file's path is the page's title
-        if not text.startswith("# "):
+        # (a generated report's first line is an HTML comment that names its command: the title follows it)
+        first = next((line for line in text.splitlines() if line.strip() and not line.startswith("<!--")), "")
+        if not first.startswith("# "):
             text = f"# `{docname}.md`\n\n{text}"
     else:
         text = text.replace("](../results/", "](results/")
