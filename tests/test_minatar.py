@@ -30,7 +30,7 @@ CHANNELS = {"Asterix": 4, "Breakout": 4, "Freeway": 7, "Seaquest": 10, "SpaceInv
 MINIMAL_ACTIONS = {"Asterix": 5, "Breakout": 3, "Freeway": 3, "Seaquest": 6, "SpaceInvaders": 4}
 MINATAR_KWARGS = dict(features_extractor_class=MinAtarCNN, net_arch=[])
 # The algorithms whose YAML files have the MinAtar entries, and what each may add to DQN's settings there
-MINATAR_ALGOS = ("dqn", "dqn_nstep", "qrdqn", "offon_dqn", "offon_lambda", "offon_lambda_choice")
+MINATAR_ALGOS = ("dqn", "dqn_nstep", "qrdqn", "offon_paper", "offon_watkins", "offon_dqn")
 
 
 @pytest.mark.parametrize("name", sorted(MINATAR_GAMES))
@@ -206,7 +206,7 @@ def test_yaml_entries_are_the_minatar_paper_settings_for_every_algorithm() -> No
             assert {key: entries[env_id][key] for key in entry} == entry, (algo, env_id)
             if algo == "dqn_nstep":
                 assert extra == {"n_steps": 3}
-            elif algo == "offon_lambda_choice":
+            elif algo == "offon_dqn":
                 # OffOnDQN's targets as its constructor defaults have them
                 assert extra and all(extra[key] == targets[key] for key in extra), extra
             elif algo in ("dqn", "qrdqn"):
@@ -216,7 +216,8 @@ def test_yaml_entries_are_the_minatar_paper_settings_for_every_algorithm() -> No
 def test_yaml_entry_builds_the_paper_network_and_optimizer(tmp_path: Path) -> None:
     from test_hyperparams import build
 
-    model, _ = build("offon_lambda_choice", "MinAtar/Breakout-v0", HYPERPARAMS_DIR / "offon_lambda_choice.yml", tmp_path)
+    # The MinAtar head-to-head runs OffOnDQN's defaults under their former name: it reads offon_dqn.yml
+    model, _ = build("offon_lambda_choice", "MinAtar/Breakout-v0", HYPERPARAMS_DIR / "offon_dqn.yml", tmp_path)
     try:
         assert isinstance(model.q_net.features_extractor, MinAtarCNN)
         assert [type(layer) for layer in model.q_net.q_net] == [nn.Linear]
