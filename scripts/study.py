@@ -101,6 +101,11 @@ class Study:
     seeds_on: dict[str, list[int]] = field(default_factory=dict)
     ceilings: dict[str, float] = field(default_factory=dict)
     out: str = ""
+    labels: dict[str, str] = field(default_factory=dict)
+
+    def label(self, algo: str) -> str:
+        """The name tables give ``algo``: the study's own (``labels``), else the command-line name's usual one."""
+        return self.labels.get(algo) or label(algo)
 
     def seeds_for(self, algo: str, env: str) -> list[int]:
         """The seeds ``algo`` is judged on on ``env``: its candidate's own, else the env's (``seeds_on``), else the study's."""
@@ -153,6 +158,7 @@ class Study:
             seeds_on={env: [int(seed) for seed in seeds] for env, seeds in data.get("seeds_on", {}).items()},
             ceilings={env: float(value) for env, value in data.get("ceilings", {}).items()},
             out=str(data.get("out", "")),
+            labels=dict(data.get("labels", {})),
         )
         if study.tables not in ("study", "benchmark"):
             raise ValueError(f"{path}: tables must be 'study' or 'benchmark', not {study.tables!r}")
@@ -250,10 +256,10 @@ def judge_criterion(study: Study, runs: dict, scores: dict, criterion: dict, alg
         iqms = iqm_intervals(study, runs, scores, measure)
         name = f"IQM of normalised {measure.upper() if measure == 'auc' else measure}"
         if algo not in iqms or reference not in iqms:
-            return None, f"{name} above {label(reference)}'s: runs missing"
+            return None, f"{name} above {study.label(reference)}'s: runs missing"
         ours, theirs = iqms[algo], iqms[reference]
         return ours[0] > theirs[0], (
-            f"{name} above {label(reference)}'s: {ours[0]:.3f} [{ours[1]:.3f}, {ours[2]:.3f}] against "
+            f"{name} above {study.label(reference)}'s: {ours[0]:.3f} [{ours[1]:.3f}, {ours[2]:.3f}] against "
             f"{theirs[0]:.3f} [{theirs[1]:.3f}, {theirs[2]:.3f}]"
         )
     if kind == "final_within":
@@ -274,7 +280,7 @@ def final_not_below(
 ) -> tuple[bool | None, str]:
     """On every env, the upper bound of the interval of (``algo`` - reference) mean final return at least minus
     ``margin`` times the env's range (0: not below zero)."""
-    text = f"final return not below {label(reference)}'s on any env by the interval of the difference"
+    text = f"final return not below {study.label(reference)}'s on any env by the interval of the difference"
     if margin:
         text += f" by more than {margin:g} of the env's range"
     below, cells = [], []
@@ -299,7 +305,7 @@ def final_within(
     runs missing, an env fails already where the mean would stay below the bar even if every missing run ended at the
     env's ceiling (``ceilings``: the highest return an episode can have there); otherwise it waits.
     """
-    text = f"final return at least {label(reference)}'s minus {margin:g} of the env's range on every env"
+    text = f"final return at least {study.label(reference)}'s minus {margin:g} of the env's range on every env"
     below, bars, waiting = [], [], []
     for env in envs:
         if not complete(study, runs, env, reference):
@@ -314,7 +320,7 @@ def final_within(
             continue
         best = (finals.sum() + missing * study.ceilings.get(env, 0.0)) / len(study.seeds_for(algo, env))
         ours = float(np.mean(finals)) if len(finals) else np.nan
-        bars.append(f"{env} {ours:.1f} against the bar {bar:.1f} ({label(reference)} {theirs:.1f})")
+        bars.append(f"{env} {ours:.1f} against the bar {bar:.1f} ({study.label(reference)} {theirs:.1f})")
         if best < bar:
             below.append(env + (f" (out of reach with {missing} runs missing)" if missing else ""))
         elif missing:
@@ -329,7 +335,7 @@ def mean_above(
     study: Study, runs: dict, scores: dict, algo: str, reference: str, measure: str, envs: list[str]
 ) -> tuple[bool | None, str]:
     """``algo``'s mean over ``envs`` of its normalised mean ``measure`` above the reference's."""
-    text = f"mean normalised {measure.upper() if measure == 'auc' else measure} above {label(reference)}'s"
+    text = f"mean normalised {measure.upper() if measure == 'auc' else measure} above {study.label(reference)}'s"
     if not all(complete(study, runs, env, name) for env in envs for name in (algo, reference)):
         return None, f"{text}: runs missing"
     ours, theirs = (mean_normalised(study, scores, name, measure, envs) for name in (algo, reference))
@@ -349,7 +355,7 @@ def auc_apart_above(
     study: Study, runs: dict, scores: dict, algo: str, reference: str, at_least: int
 ) -> tuple[bool | None, str]:
     """On at least ``at_least`` envs, the 95% interval of ``algo``'s mean AUC lies above the reference's, apart."""
-    text = f"AUC interval above {label(reference)}'s, apart, on at least {at_least} envs"
+    text = f"AUC interval above {study.label(reference)}'s, apart, on at least {at_least} envs"
     apart, cells = 0, []
     for env in study.envs:
         if not complete_pair(study, runs, env, algo, reference):
@@ -384,7 +390,7 @@ def interval(values: tuple[float, float, float], spec: str = ".2f") -> str:
 
 
 def per_env_table(study: Study, runs: dict, scores: dict, measure: str) -> list[str]:
-    header = " | ".join(label(algo) for algo in study.algos)
+    header = " | ".join(study.label(algo) for algo in study.algos)
     lines = [f"| env | {header} |", "|---|" + "---:|" * len(study.algos)]
     for env in study.envs:
         cells = []
@@ -402,7 +408,7 @@ def per_env_table(study: Study, runs: dict, scores: dict, measure: str) -> list[
 
 def difference_table(study: Study, scores: dict) -> list[str]:
     others = [algo for algo in study.algos if algo != "dqn"]
-    lines = [f"| env | {' | '.join(f'{label(algo)} - DQN' for algo in others)} |", "|---|" + "---:|" * len(others)]
+    lines = [f"| env | {' | '.join(f'{study.label(algo)} - DQN' for algo in others)} |", "|---|" + "---:|" * len(others)]
     for env in study.envs:
         cells = []
         for algo in others:
@@ -419,12 +425,13 @@ def command(study: Study) -> str:
 def rule_lines(study: Study, runs: dict, scores: dict, decision: str, lines: list[str]) -> list[str]:
     """The verdict, the rule's criteria and the same criteria against ``also_against``, as Markdown lines."""
     text = [
-        f"**Verdict: {decision}.** The rule (`{study.path.as_posix()}`), stated {study.stated}, for {label(study.candidate)}:",
+        f"**Verdict: {decision}.** The rule (`{study.path.as_posix()}`), stated {study.stated}, for "
+        f"{study.label(study.candidate)}:",
         "",
         *[f"- {line}" for line in lines],
     ]
     for other in study.also_against:
-        text.append(f"- reported, not part of the rule, against {label(other)}:")
+        text.append(f"- reported, not part of the rule, against {study.label(other)}:")
         for criterion in study.rule:
             ok, line = judge_criterion(study, runs, scores, {**criterion, "reference": other}, study.candidate)
             text.append(f"  - {'holds' if ok else 'does not hold' if ok is not None else 'open'}: {line}")
@@ -466,7 +473,8 @@ def report(study: Study, root: Path, out: Path) -> str:
         iqms = iqm_intervals(study, runs, scores, measure)
         title = "AUC" if measure == "auc" else "final return"
         text += ["", f"## IQM of normalised {title} over the envs (algorithms with every run in)", ""]
-        text += ["| algorithm | IQM |", "|---|---:|", *[f"| {label(algo)} | {interval(iqms[algo], '.3f')} |" for algo in iqms]]
+        rows = [f"| {study.label(algo)} | {interval(iqms[algo], '.3f')} |" for algo in iqms]
+        text += ["| algorithm | IQM |", "|---|---:|", *rows]
     if study.normalisation == MINMAX:
         text += ["", "Normalisation (score - low) / (high - low), low and high per env over every run of the study there."]
     else:
@@ -487,7 +495,7 @@ def plot_curves(study: Study, runs: dict, out: Path) -> None:
         for algo, kept in runs[env].items():
             grid, curves = evaluation_curves(kept)
             mean, low, high = mean_ci(curves, study.reps_iqm)
-            ax.plot(grid, mean, color=COLORS.get(algo), label=f"{label(algo)} ({len(kept)})")
+            ax.plot(grid, mean, color=COLORS.get(algo), label=f"{study.label(algo)} ({len(kept)})")
             ax.fill_between(grid, low, high, color=COLORS.get(algo), alpha=0.2, linewidth=0)
         ax.set(title=env, xlabel="Environment steps", ylabel="Evaluation return")
         ax.grid(alpha=0.3)
@@ -507,7 +515,7 @@ def plot_aggregate(study: Study, runs: dict, scores: dict, out: Path) -> None:
         for row, (algo, (point, low, high)) in enumerate(iqms.items()):
             ax.barh(row, high - low, left=low, color=COLORS.get(algo), alpha=0.6, height=0.6)
             ax.plot([point, point], [row - 0.3, row + 0.3], color="black", linewidth=2)
-        ax.set_yticks(range(len(iqms)), [label(algo) for algo in iqms])
+        ax.set_yticks(range(len(iqms)), [study.label(algo) for algo in iqms])
         ax.set_title(f"IQM of normalised {'AUC' if measure == 'auc' else 'final return'}", fontsize=10)
         ax.grid(axis="x", alpha=0.3)
     fig.suptitle(f"{study.name}: across {len(study.envs)} envs (95% stratified bootstrap CIs)", fontsize=10)
@@ -540,7 +548,7 @@ def setup_check(study: Study, root: Path, random_scores: dict) -> tuple[bool, li
             above = bool(low > random["high"])
             passed &= above
             lines.append(
-                f"{env} seed {seed}: {label(check['algo'])} {episodes.mean():.2f} [{low:.2f}, {high:.2f}] "
+                f"{env} seed {seed}: {study.label(check['algo'])} {episodes.mean():.2f} [{low:.2f}, {high:.2f}] "
                 f"({len(episodes)} episodes) against random {random['mean']:.2f} [{random['low']:.2f}, {random['high']:.2f}]: "
                 f"{'above' if above else 'NOT above'}"
             )

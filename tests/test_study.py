@@ -111,6 +111,8 @@ def test_the_minatar_study_file_reads() -> None:
     assert set(study.normalisation) == set(study.envs)
     assert all(low < high for low, high in study.normalisation.values())
     assert [criterion["kind"] for criterion in study.rule] == ["final_not_below", "iqm_above"]
+    # Its candidate runs under a former name; its tables call it what it is
+    assert study.label("offon_lambda_choice") == "OffOnDQN (defaults)" and study.label("dqn") == "DQN"
 
 
 def test_final_within_and_auc_apart_above_from_hand_made_runs(tmp_path: Path) -> None:
