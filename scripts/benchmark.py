@@ -193,6 +193,7 @@ def from_study(args: argparse.Namespace, parser: argparse.ArgumentParser) -> Non
     evaluation = study.get("evaluation", {})
     args.eval_freq = args.eval_freq or evaluation.get("every")
     args.eval_episodes = evaluation.get("episodes", args.eval_episodes)
+    args.device = args.device or study.get("device")
     args.run_names = dict(study.get("run_names", {}))
     args.candidates = dict(study.get("candidates", {}))
     args.seeds_on = dict(study.get("seeds_on", {}))

@@ -242,7 +242,7 @@ def test_a_study_file_gives_the_grid(tmp_path: Path):
     study = tmp_path / "toy.yml"
     study.write_text(
         "name: toy\nsettings: tuned\nfolder: toy_runs\nalgos: [dqn, offon_paper]\nenvs: [CartPole-v1, Acrobot-v1]\n"
-        "seeds: [40, 41]\nevaluation: {every: 500, episodes: 3}\nrun_names: {offon_paper: offon_dqn}\n"
+        "seeds: [40, 41]\nevaluation: {every: 500, episodes: 3}\nrun_names: {offon_paper: offon_dqn}\ndevice: cuda\n"
     )
     specs = module.build_specs(module.parse_args(["--study", str(study)]))
     assert {(spec["algo"], spec["env"], spec["seed"]) for spec in specs} == {
@@ -250,6 +250,7 @@ def test_a_study_file_gives_the_grid(tmp_path: Path):
     }
     assert all(spec["grid"] == "toy_runs" and spec["set"] == "tuned" for spec in specs)
     assert all(spec["eval_freq"] == 500 and spec["eval_episodes"] == 3 for spec in specs)
+    assert all(spec["device"] == "cuda" for spec in specs)  # the study's device, unless --device says otherwise
     paper = next(spec for spec in specs if spec["algo"] == "offon_paper")
     assert module.run_dir(tmp_path, paper) == tmp_path / "toy_runs" / "offon_dqn" / f"{paper['env']}_{paper['seed']}"
     assert "--algo offon_paper" in " ".join(module.train_command(paper, "logs"))
