@@ -173,7 +173,8 @@ class Study:
 def study_runs(study: Study, root: Path) -> tuple[dict[str, dict[str, list[Run]]], dict[str, dict[str, dict]]]:
     """
     ``runs[env][algo]`` and ``scores[env][algo]`` (final, auc, steps, solved: one per run, by seed) of the study's
-    finished runs, under the study's names for its algorithms; envs sorted, algorithms in ``run_stats``' table order.
+    finished runs, under the study's names for its algorithms; envs sorted, algorithms in ``run_stats``' table order
+    (candidates in the file's order).
     """
     loaded: dict[str, dict] = {}
     runs: dict[str, dict[str, list[Run]]] = {}
@@ -227,11 +228,11 @@ def normalised(study: Study, runs: dict, scores: dict, algo: str, measure: str) 
 def iqm_intervals(study: Study, runs: dict, scores: dict, measure: str) -> dict[str, tuple[float, float, float]]:
     """Per algorithm with every run in: the IQM of normalised ``measure`` over envs and seeds, with its interval."""
     matrices = {algo: normalised(study, runs, scores, algo, measure) for algo in study.algos}
-    complete = {algo: matrix for algo, matrix in matrices.items() if matrix is not None}
-    if not complete:
+    ready = {algo: matrix for algo, matrix in matrices.items() if matrix is not None}
+    if not ready:
         return {}
-    point, interval = interval_estimates(complete, lambda s: np.array([metrics.aggregate_iqm(s)]), study.reps_iqm)
-    return {algo: (float(point[algo][0]), float(interval[algo][0, 0]), float(interval[algo][1, 0])) for algo in complete}
+    point, interval = interval_estimates(ready, lambda s: np.array([metrics.aggregate_iqm(s)]), study.reps_iqm)
+    return {algo: (float(point[algo][0]), float(interval[algo][0, 0]), float(interval[algo][1, 0])) for algo in ready}
 
 
 def final_difference(study: Study, scores: dict, env: str, algo: str, reference: str) -> tuple[float, float, float] | None:
