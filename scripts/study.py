@@ -401,7 +401,7 @@ def per_env_table(study: Study, runs: dict, scores: dict, measure: str) -> list[
                 cells.append("-")
                 continue
             point, low, high = (float(part[0]) for part in mean_ci(values, study.reps_iqm))
-            text = interval((point, low, high) if len(values) > 1 else (point, np.nan, np.nan))
+            text = interval((point, low, high)) if len(values) > 1 else f"{point:.2f}"  # the count follows
             cells.append(f"{text} ({len(values)})")
         lines.append(f"| {env} | {' | '.join(cells)} |")
     return lines
