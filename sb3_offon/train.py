@@ -95,14 +95,46 @@ def one_thread_by_default(argv: list[str]) -> list[str]:
     return [*argv, "--num-threads", str(DEFAULT_NUM_THREADS)]
 
 
+def add_checkpoint_arguments(parser: argparse.ArgumentParser) -> None:
+    """
+    The options this package adds to the zoo's: checkpoints from which an interrupted run goes on (:mod:`sb3_offon.resume`;
+    the zoo's ``--save-freq`` saves models, and its ``-i`` starts a new run from one).
+
+    :param parser: the zoo's parser
+    """
+    parser.add_argument(
+        "--checkpoint-freq",
+        type=int,
+        default=0,
+        help="write a checkpoint to resume the run from every n env steps (model, replay buffer, evaluations, monitor "
+        "files; the newest one kept, removed when the run reaches its budget). A multiple of --eval-freq is cheapest",
+    )
+    parser.add_argument(
+        "--checkpoint-dir",
+        default=None,
+        help="where the checkpoints go (default: the --resume folder, else a checkpoint/ folder in the run's log folder)",
+    )
+    parser.add_argument(
+        "--resume",
+        default=None,
+        metavar="CHECKPOINT_DIR",
+        help="go on with the run checkpointed in this folder, to its budget (-n must be the run's): its step count, "
+        "schedules, evaluations and monitor files go on; the random generators are seeded afresh from --seed and the step",
+    )
+
+
 class DescribedArgumentParser(argparse.ArgumentParser):
-    """An ``argparse.ArgumentParser`` whose help opens with :func:`help_description` (before the long usage line)."""
+    """
+    An ``argparse.ArgumentParser`` whose help opens with :func:`help_description` (before the long usage line), with the
+    options of :func:`add_checkpoint_arguments`.
+    """
 
     description_text = ""
 
     def __init__(self, *args, **kwargs) -> None:  # type: ignore[no-untyped-def]
         kwargs.setdefault("prog", prog())
         super().__init__(*args, **kwargs)
+        add_checkpoint_arguments(self)
 
     def format_help(self) -> str:
         """The description as it is written, then argparse's help (usage, options)."""

@@ -15,6 +15,7 @@ files the default ``-conf``:
 """
 
 import inspect
+import shutil
 from pathlib import Path
 from typing import Any
 
@@ -29,11 +30,13 @@ from rl_zoo3.exp_manager import ExperimentManager
 from rl_zoo3.hyperparams_opt import convert_offpolicy_params, sample_dqn_params
 from stable_baselines3 import DQN
 from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.callbacks import EvalCallback
 
 # Registers CartPoleFallPenalty-v1 and MountainCarGoalBonus-v0 (also done by ``import sb3_offon``)
 import sb3_offon.envs  # noqa: F401
 from sb3_offon.offon_dqn import OffOnDQN
 from sb3_offon.offon_dqn.offon_dqn import LOSS_FUNCTIONS, MC_MIXING_OPTIONS, MC_TRUNCATION_OPTIONS, SARSA_TARGET_OPTIONS
+from sb3_offon.resume import Checkpoint, RunCheckpoint, cut_running_episodes, joined_monitor, resumed_seed
 from sb3_offon.torch_layers import MinAtarCNN
 from sb3_offon.variants import DQNMC, DQNSarsa
 
@@ -118,6 +121,95 @@ class OffOnExperimentManager(ExperimentManager):
         if bound.arguments["config"] is not None and hasattr(args, "conf_file"):
             args.conf_file = bound.arguments["config"]
         super().__init__(*bound.args[1:], **bound.kwargs)
+        # Checkpoints to resume from (sb3_offon.resume); the options exist when the command line of sb3_offon.train made
+        # ``args``, otherwise the run has none
+        self.checkpoint_freq = int(getattr(args, "checkpoint_freq", 0) or 0)
+        self.resume_dir = getattr(args, "resume", None)
+        self.checkpoint_dir = getattr(args, "checkpoint_dir", None) or self.resume_dir or f"{self.save_path}/checkpoint"
+        self.resumed_from: Checkpoint | None = None
+
+    def setup_experiment(self) -> tuple[BaseAlgorithm, dict[str, Any]] | None:
+        """
+        The zoo's setup; with ``--resume``, the model, replay buffer and env normalisation are the checkpoint's (the
+        zoo's own continue-training path loads them), the last stored transitions are cut as truncations, the random
+        generators are seeded for the resumed part (:func:`sb3_offon.resume.resumed_seed`), and the evaluation callback
+        holds the evaluations so far.
+        """
+        if self.resume_dir is not None:
+            self.resumed_from = Checkpoint.latest(self.resume_dir)
+            if self.resumed_from is None:
+                raise FileNotFoundError(f"--resume {self.resume_dir}: no checkpoint there (written by --checkpoint-freq)")
+            self.trained_agent = str(self.resumed_from.model_path)
+            self.continue_training = True
+        results = super().setup_experiment()
+        if results is None or self.resumed_from is None:
+            return results
+        model, saved_hyperparams = results
+        checkpoint = self.resumed_from
+        if self.n_timesteps != checkpoint.total_timesteps:
+            raise ValueError(
+                f"--resume {self.resume_dir}: the run was checkpointed with a budget of {checkpoint.total_timesteps} "
+                f"steps, this command trains {self.n_timesteps} (-n): a resumed run keeps its budget"
+            )
+        if getattr(model, "replay_buffer", None) is not None:
+            cut_running_episodes(model.replay_buffer)  # type: ignore[attr-defined]
+        model.set_random_seed(resumed_seed(self.seed, checkpoint.num_timesteps))
+        for callback in self.callbacks:
+            if isinstance(callback, EvalCallback):
+                checkpoint.restore_evaluations(callback, model.n_envs)
+                callback.eval_env.seed(resumed_seed(self.seed, checkpoint.num_timesteps) + 1)
+        return model, saved_hyperparams
+
+    def create_callbacks(self) -> None:
+        """The zoo's callbacks, then (with ``--checkpoint-freq``) a :class:`sb3_offon.resume.RunCheckpoint` after them."""
+        super().create_callbacks()
+        if self.checkpoint_freq > 0:
+            evaluations = [callback for callback in self.callbacks if isinstance(callback, EvalCallback)]
+            self.callbacks.append(
+                RunCheckpoint(
+                    self.checkpoint_dir,
+                    self.checkpoint_freq,
+                    eval_callback=evaluations[0] if evaluations else None,
+                    monitor_dir=self.save_path,
+                    resumed_from=self.resumed_from,
+                    verbose=self.verbose,
+                )
+            )
+
+    def _learn_the_rest(self, model: BaseAlgorithm) -> None:
+        """The zoo's ``learn`` (its logging interval, callbacks, Ctrl-C and clean-up) for the steps left to a resumed run."""
+        kwargs: dict[str, Any] = {}
+        if self.log_interval > -1:
+            kwargs["log_interval"] = self.log_interval
+        elif self.log_interval < -1:
+            kwargs["log_interval"] = None
+        if self.callbacks:
+            kwargs["callback"] = self.callbacks
+        try:
+            model.learn(self.n_timesteps - model.num_timesteps, reset_num_timesteps=False, **kwargs)
+        except KeyboardInterrupt:
+            pass  # as the zoo: the model trained so far is saved
+        finally:
+            if self.callbacks:
+                self.callbacks[0].on_training_end()
+            assert model.env is not None
+            model.env.close()
+
+    def learn(self, model: BaseAlgorithm) -> None:
+        """
+        The zoo's training; a resumed run trains the steps its budget has left, its step count going on
+        (``reset_num_timesteps=False``), and its monitor files are joined to the checkpoint's. A run that reaches its
+        budget removes its checkpoints: they are for runs that did not.
+        """
+        if self.resumed_from is None:
+            super().learn(model)
+        else:
+            self._learn_the_rest(model)
+            for name, text in self.resumed_from.monitor_texts.items():
+                current = Path(self.save_path) / name
+                current.write_text(joined_monitor(text, current.read_text() if current.is_file() else ""))
+        if self.checkpoint_freq > 0 and model.num_timesteps >= self.n_timesteps:
+            shutil.rmtree(self.checkpoint_dir, ignore_errors=True)
 
 
 def _sample_mc_params(trial: optuna.Trial, lambda_returns: bool = False) -> dict[str, Any]:

@@ -25,6 +25,12 @@ number of evaluations it records; finished runs are skipped, any other run folde
 deleted file) is wiped and redone. A finished run made with other settings (budget, evaluation, ``--hyperparams``)
 stops the runner before anything starts, unless ``--force`` redoes it.
 
+Interrupted runs resume: each run writes a checkpoint at every evaluation (``--checkpoint-freq``, see
+:mod:`sb3_offon.resume`) into ``<root>/.checkpoints/<grid>/<algo>/<env>_<seed>/``, and a run that finds one made with
+its settings goes on from it (``--resume``) instead of starting again; ``done.json`` then lists the steps it resumed at
+(``resumed_at``). The checkpoint is removed when the run finishes. With ``--ray-address`` (a cluster) runs write no
+checkpoints unless ``--checkpoint-freq`` asks for them, and then on the node that ran them.
+
 The task function :func:`run_one` runs the command in a fresh temporary folder and returns the kept files as bytes;
 the driver writes them, so a Ray cluster needs no shared file system (only ``sb3_offon`` installed on every node).
 Locally, a pool of ``--workers`` threads (default: all cores) each waits on one training subprocess; with ``--ray``
@@ -162,6 +168,13 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         "time limit, such as QR-DQN on LunarLander-v3, at some cost in throughput)",
     )
     parser.add_argument("--timeout", type=float, default=None, help="seconds after which a run is killed (and failed)")
+    parser.add_argument(
+        "--checkpoint-freq",
+        type=int,
+        default=None,
+        help="env steps between the checkpoints an interrupted run resumes from (default: every evaluation; none with "
+        "--ray-address; 0: none)",
+    )
     parser.add_argument("--force", action="store_true", help="redo finished runs that were made with other settings")
     parser.add_argument("--dry-run", action="store_true", help="list the runs and their commands, run nothing")
     args = parser.parse_args(argv)
@@ -172,6 +185,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     args.seeds = parse_seeds(args.seeds or ["10"])
     args.envs = args.envs or DEFAULT_ENVS.get(args.set, DEFAULT_ENVS["paper"])
     args.ray = args.ray or args.ray_address is not None
+    if args.checkpoint_freq is None and args.ray_address is not None:
+        args.checkpoint_freq = 0  # the nodes of a cluster may not share the driver's disk
     return args
 
 
@@ -251,8 +266,11 @@ def build_specs(args: argparse.Namespace) -> list[dict]:
                         "device": args.device or default_device(entries[env].get("policy", "MlpPolicy")),
                         "threads": args.threads,
                         "timeout": args.timeout,
+                        "checkpoint_freq": eval_freq if args.checkpoint_freq is None else args.checkpoint_freq,
                     }
                 )
+                if specs[-1]["checkpoint_freq"] > 0:
+                    specs[-1]["checkpoint_dir"] = str(checkpoint_dir(args.root, specs[-1]).resolve())
     return specs
 
 
@@ -296,6 +314,39 @@ def run_dir(root: Path, spec: dict) -> Path:
     return root / spec.get("grid", spec["set"]) / folder / f"{env_folder(spec['env'])}_{spec['seed']}"
 
 
+def checkpoint_dir(root: Path, spec: dict) -> Path:
+    """Where a run's checkpoints go: ``<root>/.checkpoints/<grid>/<algo>/<env>_<seed>`` (a hidden folder git ignores)."""
+    return root / ".checkpoints" / run_dir(root, spec).relative_to(root)
+
+
+def checkpoint_settings(spec: dict) -> dict:
+    """What a checkpoint must have been made with to be resumed by the run of ``spec``."""
+    return {key: spec[key] for key in ("set", "algo", "env", "seed", *IDENTITY)}
+
+
+def resume_point(folder: Path, spec: dict) -> list[int]:
+    """
+    The steps at which the run of ``spec`` has resumed so far, the one it would resume at now last, read from its
+    checkpoint folder (:mod:`sb3_offon.resume`'s layout: ``latest`` names the newest checkpoint, whose
+    ``checkpoint.json`` holds its step); ``[]`` when there is no checkpoint made with the run's settings.
+    """
+    recorded, latest = folder / "spec.json", folder / "latest"
+    try:
+        if json.loads(recorded.read_text()) != checkpoint_settings(spec):
+            return []
+        state = json.loads((folder / latest.read_text().strip() / "checkpoint.json").read_text())
+    except (OSError, ValueError):
+        return []
+    return [*state["resumed_at"], state["num_timesteps"]]
+
+
+def start_checkpoints(folder: Path, spec: dict) -> None:
+    """Empty a run's checkpoint folder (it may hold another run's) and record the run's settings in it."""
+    shutil.rmtree(folder, ignore_errors=True)
+    folder.mkdir(parents=True)
+    (folder / "spec.json").write_text(json.dumps(checkpoint_settings(spec), indent=2) + "\n")
+
+
 def run_threads(spec: dict) -> str:
     """The torch threads of a run (specs of runs made before ``--threads`` existed have none: one thread)."""
     return str(spec.get("threads", 1))
@@ -308,6 +359,8 @@ def train_command(spec: dict, log_folder: str) -> list[str]:
     command += ["--eval-episodes", str(spec["eval_episodes"]), "--num-threads", run_threads(spec), "--device", spec["device"]]
     if spec["set"] != "tuned":  # tuned: the bundled {algo}.yml is sb3_offon.train's default
         command += ["-conf", spec["set"]]
+    if spec.get("checkpoint_dir"):
+        command += ["--checkpoint-freq", str(spec["checkpoint_freq"]), "--checkpoint-dir", spec["checkpoint_dir"]]
     if spec["hyperparams"]:
         command += ["--hyperparams", *spec["hyperparams"]]
     return command
@@ -321,12 +374,18 @@ def run_one(spec: dict) -> dict:
     Train one run in a fresh temporary folder and return its kept files.
 
     :param spec: a run of :func:`build_specs`
-    :return: ``spec``, ``returncode`` (None when the command could not start or timed out), ``wall_time_s``,
-        ``started``/``finished`` (UTC, ISO 8601), ``host``, ``command`` and ``files`` (relative path -> bytes: the zoo's
-        run folder without models and replay buffers, plus ``train.log``, the tail of the output)
+    :return: ``spec``, ``returncode`` (None when the command could not start or timed out), ``wall_time_s`` (of this
+        part, for a resumed run), ``started``/``finished`` (UTC, ISO 8601), ``host``, ``command``, ``resumed_at`` (the
+        steps it resumed at, if any) and ``files`` (relative path -> bytes: the zoo's run folder without models and
+        replay buffers, plus ``train.log``, the tail of the output)
     """
     scratch = Path(tempfile.mkdtemp(prefix=f"offon_{spec['algo']}_{env_folder(spec['env'])}_{spec['seed']}_"))
     command = train_command(spec, "logs")
+    resumed_at = resume_point(Path(spec["checkpoint_dir"]), spec) if spec.get("checkpoint_dir") else []
+    if resumed_at:
+        command += ["--resume", spec["checkpoint_dir"]]
+    elif spec.get("checkpoint_dir"):
+        start_checkpoints(Path(spec["checkpoint_dir"]), spec)
     # The run's threads, already at import time (torch.set_num_threads comes later, from --num-threads)
     threads = run_threads(spec)
     environment = {**os.environ, "OMP_NUM_THREADS": threads, "MKL_NUM_THREADS": threads}
@@ -356,8 +415,11 @@ def run_one(spec: dict) -> dict:
     lines = (scratch / "train.log").read_text(errors="replace").splitlines()
     files["train.log"] = ("\n".join(lines[-LOG_TAIL_LINES:]) + "\n").encode()
     shutil.rmtree(scratch, ignore_errors=True)
+    if returncode == 0 and spec.get("checkpoint_dir"):
+        shutil.rmtree(spec["checkpoint_dir"], ignore_errors=True)
     return {
-        "spec": spec,
+        "spec": {key: value for key, value in spec.items() if key != "checkpoint_dir"},  # a path of this machine
+        **({"resumed_at": resumed_at} if resumed_at else {}),
         "returncode": returncode,
         "wall_time_s": round(wall_time, 2),
         "started": started.isoformat(timespec="seconds"),
@@ -431,7 +493,8 @@ def store(result: dict, root: Path) -> tuple[bool, str]:
     name = f"{spec['algo']} {spec['env']} seed {spec['seed']}"
     if ok:
         last = record["last_evaluation"]["mean_return"]
-        return True, f"done   {name} in {result['wall_time_s']:.1f} s, last evaluation {last:.1f}"
+        resumed = f" (resumed at step {', '.join(map(str, result['resumed_at']))})" if result.get("resumed_at") else ""
+        return True, f"done   {name} in {result['wall_time_s']:.1f} s{resumed}, last evaluation {last:.1f}"
     reason = f"return code {result['returncode']}" if result["returncode"] != 0 else "no evaluation or monitor file"
     tail = "\n    ".join(files["train.log"].decode(errors="replace").splitlines()[-15:])
     return False, f"FAILED {name} ({reason}) after {result['wall_time_s']:.1f} s, see {folder / 'train.log'}:\n    {tail}"
@@ -558,11 +621,13 @@ def main(argv: list[str] | None = None) -> int:
     )
     if args.dry_run:
         for spec in todo:
-            print(" ".join(["python", *train_command(spec, "<scratch>")]), "->", run_dir(args.root, spec))
+            resumed_at = resume_point(Path(spec["checkpoint_dir"]), spec) if spec.get("checkpoint_dir") else []
+            resume = f" (resumes at step {resumed_at[-1]})" if resumed_at else ""
+            print(" ".join(["python", *train_command(spec, "<scratch>")]), "->", f"{run_dir(args.root, spec)}{resume}")
         return 0
     if not todo:
         return 0
-    # Unfinished folders (crashes, interrupted grids, deleted files) are redone from scratch
+    # Unfinished folders (crashes, interrupted grids, deleted files) are redone, from their checkpoint if they have one
     for spec in todo:
         shutil.rmtree(run_dir(args.root, spec), ignore_errors=True)
     results = run_ray(todo, args.workers, args.ray_address) if args.ray else run_local(todo, args.workers)

@@ -4,8 +4,11 @@ import importlib.util
 from pathlib import Path
 from types import ModuleType
 
+import pytest
 import torch as th
 from stable_baselines3.common.base_class import BaseAlgorithm
+
+from sb3_offon.resume import Checkpoint, RunCheckpoint
 
 SCRIPTS = Path(__file__).resolve().parents[1] / "scripts"
 
@@ -25,3 +28,16 @@ def load_script(name: str) -> ModuleType:
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
+
+
+def interrupt_after_checkpoint(monkeypatch: pytest.MonkeyPatch, step: int) -> None:
+    """Ctrl-C right after the first checkpoint at or after ``step`` (the zoo stops training and saves the model)."""
+    save = RunCheckpoint.save
+
+    def save_then_interrupt(self: RunCheckpoint) -> Checkpoint:
+        checkpoint = save(self)
+        if checkpoint.num_timesteps >= step:
+            raise KeyboardInterrupt
+        return checkpoint
+
+    monkeypatch.setattr(RunCheckpoint, "save", save_then_interrupt)

@@ -16,7 +16,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import SCRIPTS, load_script
+from helpers import SCRIPTS, interrupt_after_checkpoint, load_script
+
+from sb3_offon.train import main as train_main
 
 ALGOS = ["offon_paper", "dqn"]
 SEEDS = [0, 1]
@@ -202,6 +204,32 @@ def test_resume_redoes_only_the_unfinished_run(local_root: Path):
     # Same seed, same command: the same evaluations
     for key, values in before.items():
         np.testing.assert_array_equal(evaluations(folders[1])[key], values)
+
+
+def test_an_interrupted_run_resumes_from_its_checkpoint(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
+    module = load_script("benchmark")
+    root = tmp_path / "raw"
+    arguments = ["--envs", ENV, "--seeds", "1", "--algos", "dqn"]
+    (spec,) = module.build_specs(module.parse_args([*GRID, "--root", str(root), *arguments]))
+    folder = Path(spec["checkpoint_dir"])
+    assert folder == (root / ".checkpoints" / "paper" / "dqn" / f"{ENV}_0").resolve() and spec["checkpoint_freq"] == 100
+    # The run as the runner starts it, stopped (Ctrl-C) after its checkpoint of step 200
+    module.start_checkpoints(folder, spec)
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sys, "argv", ["sb3_offon.train", *module.train_command(spec, "logs")[2:]])
+    with monkeypatch.context() as patch:
+        interrupt_after_checkpoint(patch, 200)
+        train_main()
+    assert module.resume_point(folder, spec) == [200]
+    assert module.resume_point(folder, {**spec, "eval_episodes": 3}) == []  # made with other settings: not resumed
+    assert "(resumes at step 200)" in check(benchmark(root, *arguments, "--dry-run"))
+    output = check(benchmark(root, *arguments))
+    assert "(resumed at step 200)" in output
+    run = root / "paper" / "dqn" / f"{ENV}_0"
+    done = json.loads((run / "done.json").read_text())
+    assert done["resumed_at"] == [200] and "--resume" in done["command"] and "checkpoint_dir" not in done["spec"]
+    np.testing.assert_array_equal(evaluations(run)["timesteps"], [100, 200, 300])
+    assert not folder.exists()
 
 
 def test_ray_runs_the_same_task(local_root: Path, tmp_path: Path):

@@ -1,0 +1,275 @@
+"""
+Checkpoints from which an interrupted training run goes on where it stopped.
+
+SB3 saves a model and its replay buffer, and ``learn(..., reset_num_timesteps=False)`` continues its step count, but
+what a *run* is also lives outside the model: the evaluations so far (SB3's ``EvalCallback`` keeps them in memory and
+rewrites ``evaluations.npz`` from them), the training episodes in the ``Monitor`` files, the evaluation schedule (the
+callback's own call count), and the budget the schedules were made for. rl-baselines3-zoo's ``-i`` (continue training)
+starts a new run from a model: the step count, ε and the evaluation steps start again from 0. A checkpoint here holds
+all of it, so that a resumed run has the evaluation steps, ε schedule, learning start, target updates and budget of an
+uninterrupted one.
+
+What differs from an uninterrupted run, by design:
+
+- the episode running at the checkpoint is cut: its last stored transition is marked as a time-limit truncation
+  (bootstrapped, as a time limit is; OffOnDQN's buffers also close its returns that way), the env is reset, and the
+  ``Monitor`` files lack that one unfinished episode;
+- the random generators (Python, NumPy, torch, action space, training and evaluation envs) are seeded afresh from the
+  run's seed and the checkpoint's step (:func:`resumed_seed`), not restored: a resumed run is reproducible from its seed
+  and the steps it resumed at, but not bit-identical to the uninterrupted run;
+- with ``optimize_memory_usage`` (next observations not stored) the cut transition's next observation becomes the
+  reset observation: use checkpoints without that option where this matters.
+
+Layout: ``<folder>/latest`` names the newest complete checkpoint, a sub-folder ``<folder>/<num_timesteps>/`` holding
+``model.zip``, ``replay_buffer.pkl``, ``evaluations.npz``, the joined monitor files, ``vecnormalize.pkl`` when the env
+is normalised, and ``checkpoint.json``. A checkpoint is written in full before ``latest`` is replaced (atomically),
+so a run killed while writing one resumes from the one before.
+"""
+
+import json
+import os
+import shutil
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.buffers import ReplayBuffer
+from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
+
+LATEST = "latest"
+STATE_FILE = "checkpoint.json"
+MODEL_FILE = "model.zip"
+# The zoo's _load_pretrained_agent loads a replay buffer of this name next to the model
+REPLAY_BUFFER_FILE = "replay_buffer.pkl"
+EVALUATIONS_FILE = "evaluations.npz"
+MONITOR_SUFFIX = "monitor.csv"
+
+
+def resumed_seed(seed: int | None, num_timesteps: int) -> int:
+    """
+    The seed of a run's random generators from a resume on: a function of the run's seed and the step it resumed at,
+    drawn through NumPy's ``SeedSequence`` so that it does not coincide with the plain seed of another run.
+
+    :param seed: the run's seed (None: 0)
+    :param num_timesteps: the checkpoint's step
+    :return: a seed in [0, 2**31)
+    """
+    return int(np.random.SeedSequence([seed or 0, num_timesteps]).generate_state(1)[0] >> 1)
+
+
+def joined_monitor(earlier: str | None, current: str) -> str:
+    """
+    The text of one ``Monitor`` file that covers a run across a resume: the earlier part's header and episodes, then
+    the current part's episodes, their times (``t``, seconds since the monitor started) shifted to the earlier start.
+
+    :param earlier: the earlier part's text (None: the run was not resumed, ``current`` is returned)
+    :param current: the text the current part's ``Monitor`` wrote
+    :return: the joined text
+    """
+    if not earlier:
+        return current
+    earlier_lines = earlier.splitlines()
+    current_lines = current.splitlines()
+    if len(current_lines) < 2:
+        return earlier
+    shift = json.loads(current_lines[0][1:])["t_start"] - json.loads(earlier_lines[0][1:])["t_start"]
+    t_column = current_lines[1].split(",").index("t")
+    rows = []
+    for line in current_lines[2:]:
+        cells = line.split(",")
+        cells[t_column] = str(round(float(cells[t_column]) + shift, 6))
+        rows.append(",".join(cells))
+    return "\n".join([*earlier_lines, *rows]) + "\n"
+
+
+def cut_running_episodes(replay_buffer: ReplayBuffer) -> None:
+    """
+    Mark each env's last stored transition, unless it ended its episode, as a time-limit truncation (done and
+    timeout), as SB3's buffers store one: the env is reset after it, so the next transition belongs to a new episode.
+
+    Without ``handle_timeout_termination`` a timeout cannot be told from a terminal state, and the transition is left
+    as it is (a one-step target still bootstraps from its stored next observation).
+
+    :param replay_buffer: the buffer, as loaded from a checkpoint
+    """
+    if not replay_buffer.handle_timeout_termination or (replay_buffer.pos == 0 and not replay_buffer.full):
+        return
+    last = (replay_buffer.pos - 1) % replay_buffer.buffer_size
+    running = replay_buffer.dones[last] == 0
+    replay_buffer.timeouts[last] = np.logical_or(replay_buffer.timeouts[last], running)
+    replay_buffer.dones[last] = np.logical_or(replay_buffer.dones[last], running)
+
+
+@dataclass
+class Checkpoint:
+    """
+    A complete checkpoint on disk (see the module's docstring for its files).
+
+    :param folder: its folder, ``<checkpoint folder>/<num_timesteps>``
+    :param num_timesteps: the run's step count when it was written
+    :param total_timesteps: the run's budget (the schedules' horizon)
+    :param seed: the run's seed
+    :param resumed_at: the steps at which the run was resumed before this checkpoint was written
+    :param best_mean_reward: the evaluation callback's best mean return so far
+    :param last_mean_reward: its latest mean return
+    :param saved: when it was written (UTC, ISO 8601)
+    :param monitor_texts: the run's monitor files up to this checkpoint, by file name (read with the checkpoint: a
+        resumed run writing its own checkpoints into the same folder removes this one)
+    """
+
+    folder: Path
+    num_timesteps: int
+    total_timesteps: int
+    seed: int | None
+    resumed_at: list[int] = field(default_factory=list)
+    best_mean_reward: float = -np.inf
+    last_mean_reward: float = -np.inf
+    saved: str = ""
+    monitor_texts: dict[str, str] = field(default_factory=dict)
+
+    @classmethod
+    def latest(cls, folder: str | Path) -> "Checkpoint | None":
+        """
+        The newest complete checkpoint under ``folder`` (None when there is none).
+
+        :param folder: the checkpoint folder of a run (``--checkpoint-dir``)
+        """
+        pointer = Path(folder) / LATEST
+        if not pointer.is_file():
+            return None
+        checkpoint_folder = Path(folder) / pointer.read_text().strip()
+        state = json.loads((checkpoint_folder / STATE_FILE).read_text())
+        monitors = {path.name: path.read_text() for path in sorted(checkpoint_folder.glob(f"*{MONITOR_SUFFIX}"))}
+        return cls(folder=checkpoint_folder, monitor_texts=monitors, **state)
+
+    @property
+    def model_path(self) -> Path:
+        return self.folder / MODEL_FILE
+
+    def restore_evaluations(self, callback: EvalCallback, n_envs: int) -> None:
+        """
+        Give an evaluation callback the evaluations made before this checkpoint and the call count of the run's step,
+        so that it evaluates at the uninterrupted run's steps and writes every evaluation into its file.
+
+        :param callback: the resumed run's ``EvalCallback`` (before training starts)
+        :param n_envs: the run's number of training envs
+        """
+        path = self.folder / EVALUATIONS_FILE
+        if path.is_file():
+            with np.load(path) as data:
+                callback.evaluations_timesteps = [int(step) for step in data["timesteps"]]
+                callback.evaluations_results = [list(row) for row in data["results"]]
+                callback.evaluations_length = [list(row) for row in data["ep_lengths"]]
+                if "successes" in data:
+                    callback.evaluations_successes = [list(row) for row in data["successes"]]
+        callback.best_mean_reward = self.best_mean_reward
+        callback.last_mean_reward = self.last_mean_reward
+        # EvalCallback evaluates when its call count (one call per vectorised step) is a multiple of eval_freq
+        callback.n_calls = self.num_timesteps // n_envs
+
+
+class RunCheckpoint(BaseCallback):
+    """
+    Every ``every`` env steps, write a checkpoint of the run into ``folder`` (see the module's docstring); a run started
+    with :meth:`Checkpoint.latest` of that folder then goes on from the newest.
+
+    A checkpoint is written at the first rollout start (SB3's off-policy loop collects ``train_freq`` steps, then trains)
+    at or after each multiple of ``every``: with DQN's ``train_freq`` of 4 and ``every`` a multiple of 4, at the
+    multiple itself, after the evaluation of that step.
+
+    :param folder: where the checkpoints go (created if needed); older checkpoints there are removed
+    :param every: env steps between checkpoints (counted over all envs, as ``num_timesteps``)
+    :param eval_callback: the run's evaluation callback, whose evaluations the checkpoint keeps (None: none)
+    :param monitor_dir: the folder of the run's ``Monitor`` files (None: none kept)
+    :param resumed_from: the checkpoint this run was resumed from (its monitor files are the start of this run's)
+    :param verbose: 1: a line per checkpoint written
+    """
+
+    def __init__(
+        self,
+        folder: str | Path,
+        every: int,
+        eval_callback: EvalCallback | None = None,
+        monitor_dir: str | Path | None = None,
+        resumed_from: Checkpoint | None = None,
+        verbose: int = 0,
+    ) -> None:
+        super().__init__(verbose)
+        if every <= 0:
+            raise ValueError(f"`every` must be a positive number of env steps, got {every}")
+        self.folder = Path(folder)
+        self.every = every
+        self.eval_callback = eval_callback
+        self.monitor_dir = Path(monitor_dir) if monitor_dir is not None else None
+        self.resumed_from = resumed_from
+        self._next_step = 0
+
+    def _on_training_start(self) -> None:
+        self._next_step = (self.model.num_timesteps // self.every + 1) * self.every
+
+    def _on_rollout_start(self) -> None:
+        # Between rollouts, where the previous rollout's gradient steps are done and the next has not begun: a run
+        # resumed from here collects and trains on the uninterrupted run's steps (train_freq counts within a rollout)
+        if self.model.num_timesteps >= self._next_step:
+            self.save()
+            self._next_step = (self.model.num_timesteps // self.every + 1) * self.every
+
+    def _on_step(self) -> bool:
+        return True
+
+    def joined_monitor_texts(self) -> dict[str, str]:
+        """The run's monitor files from its start, by file name (the resumed-from part first)."""
+        earlier = self.resumed_from.monitor_texts if self.resumed_from is not None else {}
+        current = {} if self.monitor_dir is None else {path.name: path.read_text() for path in self.monitor_files()}
+        return {name: joined_monitor(earlier.get(name), current.get(name, "")) for name in sorted({*earlier, *current})}
+
+    def monitor_files(self) -> list[Path]:
+        return [] if self.monitor_dir is None else sorted(self.monitor_dir.glob(f"*{MONITOR_SUFFIX}"))
+
+    def save(self) -> Checkpoint:
+        """Write a checkpoint of the run now, then point ``latest`` at it and remove the older ones."""
+        model: BaseAlgorithm = self.model
+        target = self.folder / str(model.num_timesteps)
+        shutil.rmtree(target, ignore_errors=True)  # a partial one left by a killed run
+        target.mkdir(parents=True)
+        model.save(target / MODEL_FILE)
+        if getattr(model, "replay_buffer", None) is not None:
+            model.save_replay_buffer(target / REPLAY_BUFFER_FILE)  # type: ignore[attr-defined]
+        vec_normalize = model.get_vec_normalize_env()
+        if vec_normalize is not None:
+            vec_normalize.save(str(target / "vecnormalize.pkl"))
+        monitors = self.joined_monitor_texts()
+        for name, text in monitors.items():
+            (target / name).write_text(text)
+        state: dict[str, Any] = {
+            "num_timesteps": model.num_timesteps,
+            "total_timesteps": model._total_timesteps,
+            "seed": model.seed,
+            "resumed_at": [*self.resumed_from.resumed_at, self.resumed_from.num_timesteps] if self.resumed_from else [],
+            "saved": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        }
+        if self.eval_callback is not None:
+            callback = self.eval_callback
+            if callback.evaluations_timesteps:
+                arrays: dict[str, Any] = {
+                    "timesteps": callback.evaluations_timesteps,
+                    "results": callback.evaluations_results,
+                    "ep_lengths": callback.evaluations_length,
+                }
+                if callback.evaluations_successes:
+                    arrays["successes"] = callback.evaluations_successes
+                np.savez(target / EVALUATIONS_FILE, **arrays)
+            state.update(best_mean_reward=float(callback.best_mean_reward), last_mean_reward=float(callback.last_mean_reward))
+        (target / STATE_FILE).write_text(json.dumps(state, indent=2))
+        pointer = self.folder / f"{LATEST}.tmp"
+        pointer.write_text(target.name)
+        os.replace(pointer, self.folder / LATEST)
+        for older in self.folder.iterdir():
+            if older.is_dir() and older != target:
+                shutil.rmtree(older, ignore_errors=True)
+        if self.verbose >= 1:
+            print(f"Checkpoint of step {model.num_timesteps} written to {target}")
+        return Checkpoint(folder=target, monitor_texts=monitors, **state)

@@ -1,0 +1,126 @@
+"""Checkpoints and resumed runs (sb3_offon.resume, ``--checkpoint-freq`` and ``--resume`` of ``python -m sb3_offon.train``)."""
+
+import itertools
+import json
+import pickle
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from gymnasium import spaces
+from helpers import interrupt_after_checkpoint
+from stable_baselines3 import DQN
+from stable_baselines3.common.buffers import ReplayBuffer
+
+from sb3_offon import OffOnDQN
+from sb3_offon.resume import Checkpoint, RunCheckpoint, cut_running_episodes, joined_monitor, resumed_seed
+from sb3_offon.train import main
+
+BUDGET, EVERY = 4000, 1000
+COMMAND = [
+    "--env", "CartPole-v1", "--seed", "3", "-n", str(BUDGET), "--eval-freq", str(EVERY), "--eval-episodes", "2",
+    "--checkpoint-freq", str(EVERY), "--hyperparams", "learning_starts:500", "exploration_fraction:0.5",
+]  # fmt: skip
+
+
+def test_joined_monitor_shifts_the_later_part_to_the_earlier_start() -> None:
+    earlier = '#{"t_start": 100.0, "env_id": "CartPole-v1"}\nr,l,t\n10.0,10,1.5\n20.0,20,3.0\n'
+    later = '#{"t_start": 160.5, "env_id": "CartPole-v1"}\nr,l,t\n30.0,30,2.0\n'
+    assert joined_monitor(earlier, later) == (
+        '#{"t_start": 100.0, "env_id": "CartPole-v1"}\nr,l,t\n10.0,10,1.5\n20.0,20,3.0\n30.0,30,62.5\n'
+    )
+    assert joined_monitor(None, later) == later
+    # A column after t (MountainCarGoalBonus-v0's goal flag) stays in place
+    extra = '#{"t_start": 101.0}\nr,l,t,goal_reached\n-90.0,90,4.0,True\n'
+    assert joined_monitor('#{"t_start": 100.0}\nr,l,t,goal_reached\n', extra).splitlines()[-1] == "-90.0,90,5.0,True"
+
+
+def test_cut_running_episodes_marks_the_last_transitions_as_truncations() -> None:
+    # 6 transitions, 3 slots per env (SB3 divides the size by the number of envs)
+    buffer = ReplayBuffer(6, spaces.Box(-1, 1, (1,)), spaces.Discrete(2), n_envs=2, handle_timeout_termination=True)
+    for step in range(4):  # wraps: slot 0 holds the 4th transition
+        done = np.array([step == 3, False])  # env 0's episode ends (terminally) at the last step, env 1's runs on
+        buffer.add(np.zeros((2, 1)), np.ones((2, 1)), np.zeros(2), np.ones(2), done, [{}, {}])
+    cut_running_episodes(buffer)
+    assert buffer.pos == 1 and buffer.full
+    np.testing.assert_array_equal(buffer.dones[0], [1, 1])
+    np.testing.assert_array_equal(buffer.timeouts[0], [0, 1])  # the terminal one stays terminal
+    np.testing.assert_array_equal(buffer.dones[1:], 0)  # older transitions untouched
+    empty = ReplayBuffer(3, spaces.Box(-1, 1, (1,)), spaces.Discrete(2), handle_timeout_termination=True)
+    cut_running_episodes(empty)
+    assert not empty.dones.any()
+
+
+def test_resumed_seed_depends_on_seed_and_step() -> None:
+    assert resumed_seed(3, 2000) == resumed_seed(3, 2000)
+    assert len({resumed_seed(3, 2000), resumed_seed(3, 3000), resumed_seed(4, 2000)}) == 3
+    assert 0 <= resumed_seed(None, 0) < 2**31
+
+
+def test_run_checkpoint_rejects_a_bad_frequency(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="`every`"):
+        RunCheckpoint(tmp_path, 0)
+
+
+def train(monkeypatch: pytest.MonkeyPatch, folder: Path, algo: str, *extra: str) -> Path:
+    """Train through the command line in-process, logs in ``folder``; the run's log folder."""
+    monkeypatch.setattr(sys, "argv", ["sb3_offon.train", "--algo", algo, *COMMAND, "-f", str(folder), *extra])
+    main()
+    (run,) = (folder / algo).iterdir()
+    return run
+
+
+def monitor_rows(path: Path) -> list[list[float]]:
+    return [[float(cell) for cell in line.split(",")] for line in path.read_text().splitlines()[2:]]
+
+
+@pytest.mark.parametrize("algo, algo_class", [("offon_dqn", OffOnDQN), ("dqn_nstep", DQN)])
+def test_an_interrupted_run_resumes_as_the_uninterrupted_one_goes(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, algo: str, algo_class: type[DQN]
+) -> None:
+    whole = train(monkeypatch, tmp_path / "whole", algo)
+    with monkeypatch.context() as patch:
+        interrupt_after_checkpoint(patch, 2000)
+        cut = train(patch, tmp_path / "cut", algo)
+    checkpoint = Checkpoint.latest(cut / "checkpoint")
+    # CartPole's settings collect 256 steps between gradient phases: the checkpoint is at the rollout start after 2000
+    assert checkpoint is not None and checkpoint.num_timesteps == 2048 and checkpoint.total_timesteps == BUDGET
+    # The buffer resumes as it was: n-step DQN's keeps its n (SB3's load warns that the constructor's n_steps is
+    # ignored: the loaded buffer's is used), the cut transitions are marked when it is loaded
+    with open(checkpoint.folder / "replay_buffer.pkl", "rb") as file:
+        buffer = pickle.load(file)
+    assert buffer.pos == 2048 and getattr(buffer, "n_steps", 1) == (10 if algo == "dqn_nstep" else 1)
+    cut_evaluations = np.load(cut / "evaluations.npz")
+    np.testing.assert_array_equal(cut_evaluations["timesteps"], [1000, 2000])
+
+    resumed = train(monkeypatch, tmp_path / "resumed", algo, "--resume", str(cut / "checkpoint"))
+
+    evaluations = np.load(resumed / "evaluations.npz")
+    np.testing.assert_array_equal(evaluations["timesteps"], [1000, 2000, 3000, 4000])
+    np.testing.assert_array_equal(evaluations["results"][:2], cut_evaluations["results"])
+    final, reference = (algo_class.load(run / "CartPole-v1.zip") for run in (resumed, whole))
+    # The step count, gradient steps, target-update counter and epsilon schedule went on as in the uninterrupted run
+    for attribute in ("num_timesteps", "_n_updates", "_n_calls", "exploration_rate", "_total_timesteps"):
+        assert getattr(final, attribute) == getattr(reference, attribute), attribute
+    # The monitor file holds the episodes of both parts, in order, under the first part's header
+    joined, first = resumed / "0.monitor.csv", cut / "0.monitor.csv"
+    assert joined.read_text().splitlines()[0] == first.read_text().splitlines()[0]
+    rows, first_rows = monitor_rows(joined), monitor_rows(first)
+    assert rows[: len(first_rows)] == first_rows and len(rows) > len(first_rows)
+    assert sum(row[1] for row in rows) <= BUDGET  # every step counted once (the cut episode is in neither part)
+    assert all(later[2] >= earlier[2] for earlier, later in itertools.pairwise(rows))
+    # A run that reaches its budget leaves no checkpoint behind
+    assert not (cut / "checkpoint").exists()
+
+
+def test_resume_keeps_the_budget(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    with monkeypatch.context() as patch:
+        interrupt_after_checkpoint(patch, 1000)
+        cut = train(patch, tmp_path / "cut", "dqn")
+    state = json.loads((cut / "checkpoint" / "1024" / "checkpoint.json").read_text())
+    assert state["num_timesteps"] == 1024 and state["resumed_at"] == []
+    with pytest.raises(ValueError, match="budget of 4000 steps, this command trains 5000"):
+        train(monkeypatch, tmp_path / "longer", "dqn", "--resume", str(cut / "checkpoint"), "-n", "5000")
+    with pytest.raises(FileNotFoundError, match="no checkpoint there"):
+        train(monkeypatch, tmp_path / "none", "dqn", "--resume", str(tmp_path / "nowhere"))
