@@ -75,6 +75,10 @@ import numpy as np
 import yaml
 from tqdm import tqdm
 
+# study_file.py sits next to this script: importable however it is started (as a script, or loaded from its path)
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from study_file import Study
+
 ALGOS = ["offon_paper", "dqn_mc", "dqn_sarsa", "dqn"]
 # The paper's Figures 8, 10 and 12; the tuned set also has the zoo's Acrobot-v1 entry
 DEFAULT_ENVS = {
@@ -178,7 +182,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--force", action="store_true", help="redo finished runs that were made with other settings")
     parser.add_argument("--dry-run", action="store_true", help="list the runs and their commands, run nothing")
     args = parser.parse_args(argv)
-    args.run_names, args.candidates = {}, {}
+    args.run_names, args.candidates, args.study_file, args.seeds_given = {}, {}, None, False
     if args.study is not None:
         from_study(args, parser)
     args.algos = args.algos or ALGOS
@@ -191,28 +195,25 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 
 def from_study(args: argparse.Namespace, parser: argparse.ArgumentParser) -> None:
-    """The grid of a study file (``scripts/study.py`` reads the same file), narrowed by --algos, --envs and --seeds."""
-    study = yaml.safe_load(args.study.read_text())
+    """The grid of a study file (read as ``scripts/study.py`` reads it: ``study_file.Study``), narrowed by --algos, --envs
+    and --seeds."""
+    study = Study.read(args.study)
     for option, key, given, listed in (
-        ("--algos", "algos", args.algos, list(study.get("candidates", {})) or study["algos"]),
-        ("--envs", "envs", args.envs, study["envs"]),
-        ("--seeds", "seeds", parse_seeds(args.seeds) if args.seeds else None, study["seeds"]),
+        ("--algos", "algos", args.algos, study.algos),
+        ("--envs", "envs", args.envs, study.envs),
+        ("--seeds", "seeds", parse_seeds(args.seeds) if args.seeds else None, study.seeds),
     ):
         if given and not set(given) <= set(listed):
             parser.error(f"{option} {' '.join(map(str, given))}: not in the study's {key} {listed}")
-    args.set = study.get("settings", "tuned")
-    args.name = study.get("folder", study["name"])
-    args.algos = args.algos or list(study.get("candidates", {})) or list(study["algos"])
-    args.envs = args.envs or list(study["envs"])
-    args.seeds = args.seeds or [f"{seed}-{seed}" for seed in study["seeds"]]
-    evaluation = study.get("evaluation", {})
-    args.eval_freq = args.eval_freq or evaluation.get("every")
-    args.eval_episodes = evaluation.get("episodes", args.eval_episodes)
-    args.device = args.device or study.get("device")
-    args.run_names = dict(study.get("run_names", {}))
-    args.candidates = dict(study.get("candidates", {}))
-    args.seeds_on = dict(study.get("seeds_on", {}))
-    args.episodes_on = dict(evaluation.get("episodes_on", {}))
+    args.study_file, args.seeds_given = study, bool(args.seeds)
+    args.set, args.name = study.settings, study.folder
+    args.algos = args.algos or list(study.algos)
+    args.envs = args.envs or list(study.envs)
+    args.seeds = args.seeds or [f"{seed}-{seed}" for seed in study.seeds]
+    args.eval_freq = args.eval_freq or study.evaluation_every
+    args.eval_episodes = study.evaluation_episodes or args.eval_episodes
+    args.device = args.device or study.device
+    args.run_names, args.candidates = dict(study.run_names), dict(study.candidates)
 
 
 # ----------------------------------------------------------------------------------------------------------------------
@@ -277,22 +278,23 @@ def build_specs(args: argparse.Namespace) -> list[dict]:
 def candidate_specs(args: argparse.Namespace) -> list[dict]:
     """
     The runs of a study that chooses among candidates (``--study`` with ``candidates``; ``--algos`` names candidates):
-    each candidate's algorithm with its settings (``hyperparams``, ``per_env``), on its envs and seeds, into its folder.
+    each candidate's algorithm with its settings, on its envs and seeds, into its folder, as ``study_file.Study``
+    resolves them; ``--seeds`` keeps those of its seeds.
     """
+    study: Study = args.study_file
     specs = []
     for name in args.algos:
-        candidate = args.candidates[name]
-        for env in candidate.get("envs", args.envs):
+        algo = study.algo_of(name)
+        for env in study.envs_for(name):
             if env not in args.envs:
                 continue
-            seeds = candidate.get("seeds") or args.seeds_on.get(env) or args.seeds
             one = argparse.Namespace(**vars(args))
-            one.algos, one.envs = [candidate["algo"]], [env]
-            one.seeds = [int(seed) for seed in seeds]
-            one.hyperparams = [*candidate.get("hyperparams", []), *candidate.get("per_env", {}).get(env, [])]
-            one.name = candidate.get("folder_on", {}).get(env, candidate.get("folder", args.name))
-            one.eval_episodes = args.episodes_on.get(env, args.eval_episodes)
-            one.run_names = {candidate["algo"]: candidate["run_name"]} if "run_name" in candidate else {}
+            one.algos, one.envs = [algo], [env]
+            one.seeds = [seed for seed in study.seeds_for(name, env) if not args.seeds_given or seed in args.seeds]
+            one.hyperparams = study.hyperparams_for(name, env)
+            one.name, run_name = study.source(name, env)
+            one.eval_episodes = study.episodes_for(env, args.eval_episodes)
+            one.run_names = {algo: run_name} if run_name != algo else {}
             specs += build_specs(one)
     return specs
 

@@ -15,8 +15,9 @@ it picks on each env the candidate with the highest mean ``measure`` instead (no
 from pathlib import Path
 
 import numpy as np
+from rule import complete, judge_criterion, mean_normalised
 from run_stats import label
-from study import Study, complete, judge_criterion, mean_normalised
+from study_file import Study
 
 
 def span(seeds: list[int]) -> str:
