@@ -71,12 +71,12 @@ from collections.abc import Iterator
 from datetime import datetime, timezone
 from pathlib import Path
 
-import numpy as np
 import yaml
 from tqdm import tqdm
 
 # study_file.py sits next to this script: importable however it is started (as a script, or loaded from its path)
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from run_records import IDENTITY, run_status, store
 from study_file import Study
 
 ALGOS = ["offon_paper", "dqn_mc", "dqn_sarsa", "dqn"]
@@ -85,13 +85,10 @@ DEFAULT_ENVS = {
     "paper": ["CartPole-v1", "MountainCar-v0", "LunarLander-v3"],
     "tuned": ["CartPole-v1", "MountainCar-v0", "LunarLander-v3", "Acrobot-v1"],
 }
-# The runs' own settings that define a result: a finished run made with other values is not the requested run
-IDENTITY = ("n_timesteps", "eval_freq", "eval_episodes", "hyperparams")
 # Files of the zoo's run folder worth keeping (small); model zips and replay buffers are not
 KEEP_SUFFIXES = {".csv", ".npz", ".yml", ".yaml", ".txt", ".json"}
 KEEP_NAMES = {"vecnormalize.pkl"}
 LOG_TAIL_LINES = 60
-DONE, FAILED = "done.json", "failed.json"
 
 
 def hyperparams_dir() -> Path:
@@ -433,75 +430,6 @@ def run_one(spec: dict) -> dict:
     }
 
 
-# ----------------------------------------------------------------------------------------------------------------------
-# Resuming: which runs are finished
-# ----------------------------------------------------------------------------------------------------------------------
-def read_evaluations(folder: Path) -> dict[str, np.ndarray] | None:
-    try:
-        with np.load(folder / "evaluations.npz") as data:
-            return {key: data[key] for key in data.files}
-    except (OSError, ValueError, EOFError):
-        return None
-
-
-def run_status(folder: Path, spec: dict) -> str:
-    """``"todo"`` (no folder, or an unfinished one), ``"finished"``, or ``"conflict"`` (finished with other settings)."""
-    try:
-        record = json.loads((folder / DONE).read_text())
-    except (OSError, ValueError):
-        return "todo"
-    evaluations = read_evaluations(folder)
-    if (
-        record.get("returncode") != 0
-        or evaluations is None
-        or len(evaluations.get("timesteps", [])) != record.get("n_evaluations")
-        or len(evaluations.get("results", [])) != record.get("n_evaluations")
-        or not any(folder.glob("*monitor.csv"))
-    ):
-        return "todo"
-    same = all(record["spec"].get(key) == spec[key] for key in IDENTITY)
-    return "finished" if same else "conflict"
-
-
-def store(result: dict, root: Path) -> tuple[bool, str]:
-    """
-    Write a run's files into its folder, with ``done.json`` (or ``failed.json``) written last.
-
-    The files are written into a hidden sibling folder that replaces the run folder at the end, so that an interrupted
-    write never leaves a folder that looks finished.
-
-    :return: whether the run succeeded, and a one-line summary
-    """
-    spec, files = result["spec"], result["files"]
-    folder = run_dir(root, spec)
-    partial = folder.with_name(f".{folder.name}.partial")
-    shutil.rmtree(partial, ignore_errors=True)
-    for name, data in files.items():
-        (partial / name).parent.mkdir(parents=True, exist_ok=True)
-        (partial / name).write_bytes(data)
-    evaluations = read_evaluations(partial) if "evaluations.npz" in files else None
-    n_evaluations = 0 if evaluations is None else len(evaluations["timesteps"])
-    ok = result["returncode"] == 0 and n_evaluations > 0 and any(name.endswith("monitor.csv") for name in files)
-    record = {key: value for key, value in result.items() if key != "files"}
-    record.update(n_evaluations=n_evaluations, files=sorted(files), code_version=code_version())
-    if n_evaluations:
-        record["last_evaluation"] = {
-            "timestep": int(evaluations["timesteps"][-1]),
-            "mean_return": float(np.mean(evaluations["results"][-1])),
-        }
-    (partial / (DONE if ok else FAILED)).write_text(json.dumps(record, indent=2) + "\n")
-    shutil.rmtree(folder, ignore_errors=True)
-    partial.rename(folder)
-    name = f"{spec['algo']} {spec['env']} seed {spec['seed']}"
-    if ok:
-        last = record["last_evaluation"]["mean_return"]
-        resumed = f" (resumed at step {', '.join(map(str, result['resumed_at']))})" if result.get("resumed_at") else ""
-        return True, f"done   {name} in {result['wall_time_s']:.1f} s{resumed}, last evaluation {last:.1f}"
-    reason = f"return code {result['returncode']}" if result["returncode"] != 0 else "no evaluation or monitor file"
-    tail = "\n    ".join(files["train.log"].decode(errors="replace").splitlines()[-15:])
-    return False, f"FAILED {name} ({reason}) after {result['wall_time_s']:.1f} s, see {folder / 'train.log'}:\n    {tail}"
-
-
 def library_versions() -> dict[str, str]:
     """Python and the libraries a run's numbers depend on, as installed where the run ran (read without importing)."""
     versions = {"python": platform.python_version()}
@@ -639,7 +567,7 @@ def main(argv: list[str] | None = None) -> int:
     wall_times, failures = [], 0
     with bar:
         for n_done, result in enumerate(results, start=1):
-            ok, message = store(result, args.root)
+            ok, message = store(result, run_dir(args.root, result["spec"]), code_version())
             failures += not ok
             if ok:
                 wall_times.append(result["wall_time_s"])

@@ -1,0 +1,82 @@
+"""
+The run folders of a grid (``scripts/benchmark.py``): which runs are finished, and how a run's files and its record
+(``done.json`` or ``failed.json``) are written.
+"""
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+
+# The runs' own settings that define a result: a finished run made with other values is not the requested run
+IDENTITY = ("n_timesteps", "eval_freq", "eval_episodes", "hyperparams")
+DONE, FAILED = "done.json", "failed.json"
+
+
+def read_evaluations(folder: Path) -> dict[str, np.ndarray] | None:
+    try:
+        with np.load(folder / "evaluations.npz") as data:
+            return {key: data[key] for key in data.files}
+    except (OSError, ValueError, EOFError):
+        return None
+
+
+def run_status(folder: Path, spec: dict) -> str:
+    """``"todo"`` (no folder, or an unfinished one), ``"finished"``, or ``"conflict"`` (finished with other settings)."""
+    try:
+        record = json.loads((folder / DONE).read_text())
+    except (OSError, ValueError):
+        return "todo"
+    evaluations = read_evaluations(folder)
+    if (
+        record.get("returncode") != 0
+        or evaluations is None
+        or len(evaluations.get("timesteps", [])) != record.get("n_evaluations")
+        or len(evaluations.get("results", [])) != record.get("n_evaluations")
+        or not any(folder.glob("*monitor.csv"))
+    ):
+        return "todo"
+    same = all(record["spec"].get(key) == spec[key] for key in IDENTITY)
+    return "finished" if same else "conflict"
+
+
+def store(result: dict, folder: Path, code_version: dict[str, str]) -> tuple[bool, str]:
+    """
+    Write a run's files into its folder, with ``done.json`` (or ``failed.json``) written last.
+
+    The files are written into a hidden sibling folder that replaces the run folder at the end, so that an interrupted
+    write never leaves a folder that looks finished.
+
+    :param result: what the task function returned (its spec, return code, times, files as bytes, ...)
+    :param folder: the run's folder
+    :param code_version: the commit of the code that made the run, recorded with it
+    :return: whether the run succeeded, and a one-line summary
+    """
+    spec, files = result["spec"], result["files"]
+    partial = folder.with_name(f".{folder.name}.partial")
+    shutil.rmtree(partial, ignore_errors=True)
+    for name, data in files.items():
+        (partial / name).parent.mkdir(parents=True, exist_ok=True)
+        (partial / name).write_bytes(data)
+    evaluations = read_evaluations(partial) if "evaluations.npz" in files else None
+    n_evaluations = 0 if evaluations is None else len(evaluations["timesteps"])
+    ok = result["returncode"] == 0 and n_evaluations > 0 and any(name.endswith("monitor.csv") for name in files)
+    record = {key: value for key, value in result.items() if key != "files"}
+    record.update(n_evaluations=n_evaluations, files=sorted(files), code_version=code_version)
+    if n_evaluations:
+        record["last_evaluation"] = {
+            "timestep": int(evaluations["timesteps"][-1]),
+            "mean_return": float(np.mean(evaluations["results"][-1])),
+        }
+    (partial / (DONE if ok else FAILED)).write_text(json.dumps(record, indent=2) + "\n")
+    shutil.rmtree(folder, ignore_errors=True)
+    partial.rename(folder)
+    name = f"{spec['algo']} {spec['env']} seed {spec['seed']}"
+    if ok:
+        last = record["last_evaluation"]["mean_return"]
+        resumed = f" (resumed at step {', '.join(map(str, result['resumed_at']))})" if result.get("resumed_at") else ""
+        return True, f"done   {name} in {result['wall_time_s']:.1f} s{resumed}, last evaluation {last:.1f}"
+    reason = f"return code {result['returncode']}" if result["returncode"] != 0 else "no evaluation or monitor file"
+    tail = "\n    ".join(files["train.log"].decode(errors="replace").splitlines()[-15:])
+    return False, f"FAILED {name} ({reason}) after {result['wall_time_s']:.1f} s, see {folder / 'train.log'}:\n    {tail}"
