@@ -265,9 +265,10 @@ def _sample_offon_params(
     return hyperparams
 
 
-def sample_offon_dqn_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
+def sample_offon_paper_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
     """
-    Sampler for OffOnDQN hyperparams: the zoo's DQN parameters, the delta1 and delta2 schedules, the string options.
+    Sampler for the paper's coin-flip targets (``offon_paper``): the zoo's DQN parameters, the delta1 and delta2
+    schedules, the string options.
 
     The schedules are sampled as decaying ones (initial in [0.5, 1], final in [0, 0.5]), the paper's shape.
 
@@ -282,7 +283,7 @@ def sample_offon_dqn_params(trial: optuna.Trial, n_actions: int, n_envs: int, ad
 
 def sample_dqn_mc_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
     """
-    Sampler for DQNMC hyperparams: as :func:`sample_offon_dqn_params`, with delta2 left at 1 (no Sarsa).
+    Sampler for DQNMC hyperparams: as :func:`sample_offon_paper_params`, with delta2 left at 1 (no Sarsa).
 
     :param trial: the Optuna trial
     :param n_actions: number of actions (unused by DQN, part of the zoo's sampler signature)
@@ -295,7 +296,7 @@ def sample_dqn_mc_params(trial: optuna.Trial, n_actions: int, n_envs: int, addit
 
 def sample_dqn_sarsa_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
     """
-    Sampler for DQNSarsa hyperparams: as :func:`sample_offon_dqn_params`, with delta1 left at 0 (no Monte-Carlo).
+    Sampler for DQNSarsa hyperparams: as :func:`sample_offon_paper_params`, with delta1 left at 0 (no Monte-Carlo).
 
     :param trial: the Optuna trial
     :param n_actions: number of actions (unused by DQN, part of the zoo's sampler signature)
@@ -309,7 +310,7 @@ def sample_dqn_sarsa_params(trial: optuna.Trial, n_actions: int, n_envs: int, ad
 def sample_offon_lambda_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
     """
     Sampler for OffOnDQN with ``mc_mixing="lambda"`` (``offon_dqn``, ``offon_watkins``): the zoo's DQN parameters and
-    the lambda (delta1) and delta2 schedules, sampled as for :func:`sample_offon_dqn_params`; ``mc_mixing`` stays the
+    the lambda (delta1) and delta2 schedules, sampled as for :func:`sample_offon_paper_params`; ``mc_mixing`` stays the
     YAML's.
 
     :param trial: the Optuna trial
@@ -338,7 +339,7 @@ def sample_dqn_nstep_params(trial: optuna.Trial, n_actions: int, n_envs: int, ad
 
 SAMPLERS = {
     "dqn_nstep": sample_dqn_nstep_params,
-    "offon_paper": sample_offon_dqn_params,
+    "offon_paper": sample_offon_paper_params,
     "dqn_mc": sample_dqn_mc_params,
     "dqn_sarsa": sample_dqn_sarsa_params,
     # The search's first choice fixes delta2 at 1 (no Sarsa), as DQNMC does: the same parameters are worth sampling

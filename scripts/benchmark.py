@@ -55,6 +55,7 @@ Usage::
 
 import argparse
 import concurrent.futures
+import functools
 import importlib.metadata
 import importlib.util
 import json
@@ -220,8 +221,14 @@ def config_file(hyperparams_set: str, algo: str) -> Path:
     """The YAML file the zoo reads for ``algo`` in the set (a former name, ``hyperparams/aliases.yml``, reads its new
     name's)."""
     folder = hyperparams_dir()
-    algo = yaml.safe_load((folder / "aliases.yml").read_text()).get(algo, algo)
+    algo = aliases(folder).get(algo, algo)
     return folder / f"{algo}.yml" if hyperparams_set == "tuned" else folder / hyperparams_set / f"{algo}.yml"
+
+
+@functools.cache
+def aliases(folder: Path) -> dict[str, str]:
+    """The former names of algorithms (``hyperparams/aliases.yml``), read once."""
+    return yaml.safe_load((folder / "aliases.yml").read_text())
 
 
 def build_specs(args: argparse.Namespace) -> list[dict]:
