@@ -63,6 +63,8 @@ class Run:
     # The hyperparameter set it trained with (its spec's "set"), which a grid's folder need not be named after: the
     # head-to-heads ran the "tuned" set into results/raw/headtohead*/ ("": not recorded)
     settings: str = ""
+    # The steps at which it resumed from a checkpoint after an interruption (its done.json's "resumed_at")
+    resumed_at: tuple[int, ...] = ()
 
 
 def load_run(folder: Path) -> Run | None:
@@ -88,6 +90,7 @@ def load_run(folder: Path) -> Run | None:
         returns=results.mean(axis=1),
         episodes=episodes.reset_index(drop=True),
         settings=spec.get("set", ""),
+        resumed_at=tuple(record.get("resumed_at", ())),
     )
 
 

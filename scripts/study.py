@@ -132,6 +132,15 @@ def report(study: Study, root: Path, out: Path) -> str:
         text += ["", f"## IQM of normalised {title} over the envs (algorithms with every run in)", ""]
         rows = [f"| {study.label(algo)} | {interval(iqms[algo], '.3f')} |" for algo in iqms]
         text += ["| algorithm | IQM |", "|---|---:|", *rows]
+    resumed = [
+        f"{study.label(algo)} on {env}, seed {run.seed} (at {', '.join(f'{step:,}' for step in run.resumed_at)})"
+        for env, by_algo in runs.items()
+        for algo, algo_runs in by_algo.items()
+        for run in algo_runs
+        if run.resumed_at
+    ]
+    if resumed:
+        text += ["", f"Runs resumed from a checkpoint after an interruption (step): {'; '.join(resumed)}."]
     if study.normalisation == MINMAX:
         text += ["", "Normalisation (score - low) / (high - low), low and high per env over every run of the study there."]
     else:

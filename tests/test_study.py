@@ -71,6 +71,18 @@ def test_a_rule_that_holds(tmp_path: Path) -> None:
     assert (tmp_path / "report" / "curves.png").is_file() and (tmp_path / "report" / "aggregate.png").is_file()
 
 
+def test_the_report_names_the_runs_resumed_from_a_checkpoint(tmp_path: Path) -> None:
+    study_module = load_script("study")
+    path, root = write_study(tmp_path, {env: [3.0, 4.0, 5.0, 6.0] for env in ENVS})
+    study_module.report(study_module.Study.read(path), root, tmp_path / "before")
+    assert "resumed" not in (tmp_path / "before" / "table.md").read_text()
+    done = root / "toy" / "dqn" / "Acrobot-v1_2" / "done.json"
+    done.write_text(json.dumps({**json.loads(done.read_text()), "resumed_at": [10, 20]}))
+    study_module.report(study_module.Study.read(path), root, tmp_path / "after")
+    table = (tmp_path / "after" / "table.md").read_text()
+    assert "Runs resumed from a checkpoint after an interruption (step): DQN on Acrobot-v1, seed 2 (at 10, 20)." in table
+
+
 def test_a_final_return_below_the_reference_on_one_env(tmp_path: Path) -> None:
     study_module = load_script("study")
     path, root = write_study(tmp_path, {"CartPole-v1": [3.0, 4.0, 5.0, 6.0], "Acrobot-v1": [-10.0, -9.0, -8.0, -7.0]})
