@@ -170,6 +170,52 @@ class Checkpoint:
         # EvalCallback evaluates when its call count (one call per vectorised step) is a multiple of eval_freq
         callback.n_calls = self.num_timesteps // n_envs
 
+    def prepare(self, model: BaseAlgorithm, eval_callback: EvalCallback | None = None) -> None:
+        """
+        Make a model loaded from this checkpoint (with its replay buffer) go on as the interrupted run: the last stored
+        transitions cut as truncations (:func:`cut_running_episodes`), the random generators seeded for the resumed part
+        (:func:`resumed_seed`), and the evaluation callback holding the evaluations so far.
+
+        :param model: the model, loaded with its replay buffer
+        :param eval_callback: the resumed run's evaluation callback (None: none)
+        """
+        if getattr(model, "replay_buffer", None) is not None:
+            cut_running_episodes(model.replay_buffer)  # type: ignore[attr-defined]
+        seed = resumed_seed(self.seed, self.num_timesteps)
+        model.set_random_seed(seed)
+        if eval_callback is not None:
+            self.restore_evaluations(eval_callback, model.n_envs)
+            eval_callback.eval_env.seed(seed + 1)
+
+    def load_model(
+        self, algo_class: type[BaseAlgorithm], env: Any, eval_callback: EvalCallback | None = None, **kwargs: Any
+    ) -> BaseAlgorithm:
+        """
+        The interrupted run's model, ready to go on (the Python way; the command line's is ``--resume``)::
+
+            checkpoint = Checkpoint.latest("checkpoints")
+            model = checkpoint.load_model(OffOnDQN, env, eval_callback)
+            model.learn(checkpoint.total_timesteps - model.num_timesteps, reset_num_timesteps=False,
+                        callback=[eval_callback, RunCheckpoint("checkpoints", 10_000, eval_callback, resumed_from=checkpoint)])
+
+        The training monitor files of the part before the checkpoint are in ``monitor_texts``
+        (:func:`joined_monitor` joins one to the resumed part's file).
+
+        :param algo_class: the model's class
+        :param env: the training env, made as the interrupted run's was (and, if that run normalised it, wrapped in
+            ``VecNormalize.load`` of the checkpoint's ``vecnormalize.pkl``)
+        :param eval_callback: the resumed run's evaluation callback (None: none)
+        :param kwargs: more arguments of ``algo_class.load`` (``device``, ``custom_objects``, ...)
+        :return: the model, its replay buffer loaded
+        """
+        model = algo_class.load(self.model_path, env=env, **kwargs)
+        buffer = self.folder / REPLAY_BUFFER_FILE
+        if buffer.is_file():
+            # truncate_last_traj: OffOnDQN's buffers close their running episodes' returns as truncations
+            model.load_replay_buffer(buffer, truncate_last_traj=True)  # type: ignore[attr-defined]
+        self.prepare(model, eval_callback)
+        return model
+
 
 class RunCheckpoint(BaseCallback):
     """
@@ -182,7 +228,8 @@ class RunCheckpoint(BaseCallback):
 
     :param folder: where the checkpoints go (created if needed); older checkpoints there are removed
     :param every: env steps between checkpoints (counted over all envs, as ``num_timesteps``)
-    :param eval_callback: the run's evaluation callback, whose evaluations the checkpoint keeps (None: none)
+    :param eval_callback: the run's evaluation callback, whose evaluations the checkpoint keeps (None: none; SB3's
+        ``EvalCallback`` records its evaluations only when it has a ``log_path``)
     :param monitor_dir: the folder of the run's ``Monitor`` files (None: none kept)
     :param resumed_from: the checkpoint this run was resumed from (its monitor files are the start of this run's)
     :param verbose: 1: a line per checkpoint written

@@ -36,7 +36,7 @@ from stable_baselines3.common.callbacks import EvalCallback
 import sb3_offon.envs  # noqa: F401
 from sb3_offon.offon_dqn import OffOnDQN
 from sb3_offon.offon_dqn.offon_dqn import LOSS_FUNCTIONS, MC_MIXING_OPTIONS, MC_TRUNCATION_OPTIONS, SARSA_TARGET_OPTIONS
-from sb3_offon.resume import Checkpoint, RunCheckpoint, cut_running_episodes, joined_monitor, resumed_seed
+from sb3_offon.resume import Checkpoint, RunCheckpoint, joined_monitor
 from sb3_offon.torch_layers import MinAtarCNN
 from sb3_offon.variants import DQNMC, DQNSarsa
 
@@ -151,13 +151,8 @@ class OffOnExperimentManager(ExperimentManager):
                 f"--resume {self.resume_dir}: the run was checkpointed with a budget of {checkpoint.total_timesteps} "
                 f"steps, this command trains {self.n_timesteps} (-n): a resumed run keeps its budget"
             )
-        if getattr(model, "replay_buffer", None) is not None:
-            cut_running_episodes(model.replay_buffer)  # type: ignore[attr-defined]
-        model.set_random_seed(resumed_seed(self.seed, checkpoint.num_timesteps))
-        for callback in self.callbacks:
-            if isinstance(callback, EvalCallback):
-                checkpoint.restore_evaluations(callback, model.n_envs)
-                callback.eval_env.seed(resumed_seed(self.seed, checkpoint.num_timesteps) + 1)
+        evaluations = [callback for callback in self.callbacks if isinstance(callback, EvalCallback)]
+        checkpoint.prepare(model, evaluations[0] if evaluations else None)
         return model, saved_hyperparams
 
     def create_callbacks(self) -> None:

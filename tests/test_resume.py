@@ -6,12 +6,15 @@ import pickle
 import sys
 from pathlib import Path
 
+import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium import spaces
 from helpers import interrupt_after_checkpoint
 from stable_baselines3 import DQN
 from stable_baselines3.common.buffers import ReplayBuffer
+from stable_baselines3.common.callbacks import EvalCallback
+from stable_baselines3.common.monitor import Monitor
 
 from sb3_offon import OffOnDQN
 from sb3_offon.resume import Checkpoint, RunCheckpoint, cut_running_episodes, joined_monitor, resumed_seed
@@ -124,3 +127,38 @@ def test_resume_keeps_the_budget(tmp_path: Path, monkeypatch: pytest.MonkeyPatch
         train(monkeypatch, tmp_path / "longer", "dqn", "--resume", str(cut / "checkpoint"), "-n", "5000")
     with pytest.raises(FileNotFoundError, match="no checkpoint there"):
         train(monkeypatch, tmp_path / "none", "dqn", "--resume", str(tmp_path / "nowhere"))
+
+
+def evaluation_callback(log_path: Path) -> EvalCallback:
+    # SB3's EvalCallback keeps its evaluations (which a checkpoint saves) only when it has a log_path
+    return EvalCallback(Monitor(gym.make("CartPole-v1")), eval_freq=500, n_eval_episodes=2, log_path=str(log_path), verbose=0)
+
+
+def python_run(folder: Path, callbacks: list) -> tuple[OffOnDQN, EvalCallback, list]:
+    """A small OffOnDQN run on CartPole-v1 with evaluations and checkpoints every 500 steps, from Python."""
+    model = OffOnDQN("MlpPolicy", "CartPole-v1", learning_starts=200, train_freq=4, buffer_size=5000, seed=5)
+    evaluations = evaluation_callback(folder)
+    checkpoints = RunCheckpoint(folder, 500, evaluations)
+    return model, evaluations, [evaluations, checkpoints, *callbacks]
+
+
+def test_the_python_way_resumes_as_the_command_line_does(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    whole, whole_evaluations, callbacks = python_run(tmp_path / "whole", [])
+    whole.learn(2000, callback=callbacks)
+    cut, _, callbacks = python_run(tmp_path / "cut", [])
+    with monkeypatch.context() as patch, pytest.raises(KeyboardInterrupt):
+        interrupt_after_checkpoint(patch, 1000)
+        cut.learn(2000, callback=callbacks)
+    checkpoint = Checkpoint.latest(tmp_path / "cut")
+    assert checkpoint is not None and checkpoint.num_timesteps == 1000
+    evaluations = evaluation_callback(tmp_path / "resumed")
+    resumed = checkpoint.load_model(OffOnDQN, gym.make("CartPole-v1"), evaluations)
+    assert resumed.replay_buffer.size() == 1000 and evaluations.evaluations_timesteps == [500, 1000]
+    resumed.learn(
+        checkpoint.total_timesteps - resumed.num_timesteps,
+        reset_num_timesteps=False,
+        callback=[evaluations, RunCheckpoint(tmp_path / "cut", 500, evaluations, resumed_from=checkpoint)],
+    )
+    assert evaluations.evaluations_timesteps == whole_evaluations.evaluations_timesteps == [500, 1000, 1500, 2000]
+    for attribute in ("num_timesteps", "_n_updates", "_n_calls", "exploration_rate", "mc_prob"):
+        assert getattr(resumed, attribute) == getattr(whole, attribute), attribute
