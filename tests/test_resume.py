@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from gymnasium import spaces
 from helpers import interrupt_after_checkpoint
+from sb3_contrib import QRDQN
 from stable_baselines3 import DQN
 from stable_baselines3.common.buffers import ReplayBuffer
 from stable_baselines3.common.callbacks import EvalCallback
@@ -78,7 +79,7 @@ def monitor_rows(path: Path) -> list[list[float]]:
     return [[float(cell) for cell in line.split(",")] for line in path.read_text().splitlines()[2:]]
 
 
-@pytest.mark.parametrize("algo, algo_class", [("offon_dqn", OffOnDQN), ("dqn_nstep", DQN)])
+@pytest.mark.parametrize("algo, algo_class", [("offon_dqn", OffOnDQN), ("dqn_nstep", DQN), ("qrdqn", QRDQN)])
 def test_an_interrupted_run_resumes_as_the_uninterrupted_one_goes(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, algo: str, algo_class: type[DQN]
 ) -> None:
