@@ -118,8 +118,9 @@ def add_checkpoint_arguments(parser: argparse.ArgumentParser) -> None:
         "--resume",
         default=None,
         metavar="CHECKPOINT_DIR",
-        help="go on with the run checkpointed in this folder, to its budget (-n must be the run's): its step count, "
-        "schedules, evaluations and monitor files go on; the random generators are seeded afresh from --seed and the step",
+        help="go on with the run checkpointed in this folder (or in the checkpoint/ folder of this run folder), to its "
+        "budget (-n must be the run's): its step count, schedules, evaluations and monitor files go on, in a new run "
+        "folder; the random generators are seeded afresh from --seed and the step",
     )
 
 

@@ -100,6 +100,17 @@ def resolve_config(algo: str, config: str | None) -> str | None:
     return config
 
 
+def checkpoint_folder(resume: str | None) -> str | None:
+    """
+    The checkpoint folder ``--resume`` names: the folder itself, or, given the log folder of the interrupted run (the
+    zoo's ``logs/{algo}/{env}_{n}``), its ``checkpoint/`` sub-folder, where ``--checkpoint-freq`` writes by default.
+    """
+    if resume is None or Checkpoint.latest(resume) is not None:
+        return resume
+    inside = Path(resume) / "checkpoint"
+    return str(inside) if Checkpoint.latest(inside) is not None else resume
+
+
 class OffOnExperimentManager(ExperimentManager):
     """
     The zoo's ``ExperimentManager``, reading this package's hyperparameter files by default (see :func:`resolve_config`).
@@ -124,7 +135,7 @@ class OffOnExperimentManager(ExperimentManager):
         # Checkpoints to resume from (sb3_offon.resume); the options exist when the command line of sb3_offon.train made
         # ``args``, otherwise the run has none
         self.checkpoint_freq = int(getattr(args, "checkpoint_freq", 0) or 0)
-        self.resume_dir = getattr(args, "resume", None)
+        self.resume_dir = checkpoint_folder(getattr(args, "resume", None))
         self.checkpoint_dir = getattr(args, "checkpoint_dir", None) or self.resume_dir or f"{self.save_path}/checkpoint"
         self.resumed_from: Checkpoint | None = None
 

@@ -98,7 +98,8 @@ def test_an_interrupted_run_resumes_as_the_uninterrupted_one_goes(
     cut_evaluations = np.load(cut / "evaluations.npz")
     np.testing.assert_array_equal(cut_evaluations["timesteps"], [1000, 2000])
 
-    resumed = train(monkeypatch, tmp_path / "resumed", algo, "--resume", str(cut / "checkpoint"))
+    # The interrupted run's log folder names its checkpoint/ folder
+    resumed = train(monkeypatch, tmp_path / "resumed", algo, "--resume", str(cut))
 
     evaluations = np.load(resumed / "evaluations.npz")
     np.testing.assert_array_equal(evaluations["timesteps"], [1000, 2000, 3000, 4000])
