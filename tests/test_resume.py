@@ -67,9 +67,11 @@ def test_run_checkpoint_rejects_a_bad_frequency(tmp_path: Path) -> None:
         RunCheckpoint(tmp_path, 0)
 
 
-def train(monkeypatch: pytest.MonkeyPatch, folder: Path, algo: str, *extra: str) -> Path:
-    """Train through the command line in-process, logs in ``folder``; the run's log folder."""
-    monkeypatch.setattr(sys, "argv", ["sb3_offon.train", "--algo", algo, *COMMAND, "-f", str(folder), *extra])
+def train(monkeypatch: pytest.MonkeyPatch, folder: Path, algo: str, *extra: str, hyperparams: tuple[str, ...] = ()) -> Path:
+    """Train through the command line in-process, logs in ``folder`` (``hyperparams``: more ``--hyperparams``); the run's
+    log folder."""
+    argv = ["sb3_offon.train", "--algo", algo, *COMMAND, *hyperparams, "-f", str(folder), *extra]
+    monkeypatch.setattr(sys, "argv", argv)
     main()
     (run,) = (folder / algo).iterdir()
     return run
@@ -117,6 +119,31 @@ def test_an_interrupted_run_resumes_as_the_uninterrupted_one_goes(
     assert all(later[2] >= earlier[2] for earlier, later in itertools.pairwise(rows))
     # A run that reaches its budget leaves no checkpoint behind
     assert not (cut / "checkpoint").exists()
+
+
+def test_two_envs_resume_with_both_monitor_files(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    two = ("n_envs:2",)
+    whole = train(monkeypatch, tmp_path / "whole", "offon_dqn", hyperparams=two)
+    with monkeypatch.context() as patch:
+        interrupt_after_checkpoint(patch, 2000)
+        cut = train(patch, tmp_path / "cut", "offon_dqn", hyperparams=two)
+    # Two envs collect 2 x 256 steps between gradient phases
+    checkpoint = Checkpoint.latest(cut / "checkpoint")
+    assert checkpoint is not None and checkpoint.num_timesteps == 2048
+    with open(checkpoint.folder / "replay_buffer.pkl", "rb") as file:
+        buffer = pickle.load(file)
+    # Each env's episodes run apart (CartPole's lengths differ): the buffer's episode bookkeeping is per env
+    assert buffer.n_envs == 2 and buffer.pos == 1024
+    resumed = train(monkeypatch, tmp_path / "resumed", "offon_dqn", "--resume", str(cut), hyperparams=two)
+    np.testing.assert_array_equal(np.load(resumed / "evaluations.npz")["timesteps"], [1000, 2000, 3000, 4000])
+    final, reference = (OffOnDQN.load(run / "CartPole-v1.zip") for run in (resumed, whole))
+    for attribute in ("num_timesteps", "_n_updates", "_n_calls", "exploration_rate", "mc_prob"):
+        assert getattr(final, attribute) == getattr(reference, attribute), attribute
+    for name in ("0.monitor.csv", "1.monitor.csv"):
+        first_rows = monitor_rows(cut / name)
+        rows = monitor_rows(resumed / name)
+        assert rows[: len(first_rows)] == first_rows and len(rows) > len(first_rows), name
+    assert sum(row[1] for name in ("0.monitor.csv", "1.monitor.csv") for row in monitor_rows(resumed / name)) <= 4096
 
 
 def test_resume_keeps_the_budget(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
