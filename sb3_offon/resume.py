@@ -232,6 +232,8 @@ class RunCheckpoint(BaseCallback):
         ``EvalCallback`` records its evaluations only when it has a ``log_path``)
     :param monitor_dir: the folder of the run's ``Monitor`` files (None: none kept)
     :param resumed_from: the checkpoint this run was resumed from (its monitor files are the start of this run's)
+    :param vec_normalize_path: where in a checkpoint the ``VecNormalize`` statistics go, if the env has them
+        (rl-baselines3-zoo loads them from ``<env name>/vecnormalize.pkl`` next to the model it continues)
     :param verbose: 1: a line per checkpoint written
     """
 
@@ -242,6 +244,7 @@ class RunCheckpoint(BaseCallback):
         eval_callback: EvalCallback | None = None,
         monitor_dir: str | Path | None = None,
         resumed_from: Checkpoint | None = None,
+        vec_normalize_path: str = "vecnormalize.pkl",
         verbose: int = 0,
     ) -> None:
         super().__init__(verbose)
@@ -252,6 +255,7 @@ class RunCheckpoint(BaseCallback):
         self.eval_callback = eval_callback
         self.monitor_dir = Path(monitor_dir) if monitor_dir is not None else None
         self.resumed_from = resumed_from
+        self.vec_normalize_path = vec_normalize_path
         self._next_step = 0
 
     def _on_training_start(self) -> None:
@@ -287,7 +291,8 @@ class RunCheckpoint(BaseCallback):
             model.save_replay_buffer(target / REPLAY_BUFFER_FILE)  # type: ignore[attr-defined]
         vec_normalize = model.get_vec_normalize_env()
         if vec_normalize is not None:
-            vec_normalize.save(str(target / "vecnormalize.pkl"))
+            (target / self.vec_normalize_path).parent.mkdir(parents=True, exist_ok=True)
+            vec_normalize.save(str(target / self.vec_normalize_path))
         monitors = self.joined_monitor_texts()
         for name, text in monitors.items():
             (target / name).write_text(text)

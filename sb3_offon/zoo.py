@@ -178,6 +178,8 @@ class OffOnExperimentManager(ExperimentManager):
                     eval_callback=evaluations[0] if evaluations else None,
                     monitor_dir=self.save_path,
                     resumed_from=self.resumed_from,
+                    # Where the zoo's continue-training path looks for them (ExperimentManager._maybe_normalize)
+                    vec_normalize_path=f"{self.env_name}/vecnormalize.pkl",
                     verbose=self.verbose,
                 )
             )

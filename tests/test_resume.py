@@ -146,6 +146,18 @@ def test_two_envs_resume_with_both_monitor_files(tmp_path: Path, monkeypatch: py
     assert sum(row[1] for name in ("0.monitor.csv", "1.monitor.csv") for row in monitor_rows(resumed / name)) <= 4096
 
 
+def test_a_normalised_env_resumes_with_its_statistics(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    normalised = ("normalize:True",)
+    with monkeypatch.context() as patch:
+        interrupt_after_checkpoint(patch, 2000)
+        cut = train(patch, tmp_path / "cut", "dqn", hyperparams=normalised)
+    resumed = train(monkeypatch, tmp_path / "resumed", "dqn", "--resume", str(cut), hyperparams=normalised)
+    with open(resumed / "CartPole-v1" / "vecnormalize.pkl", "rb") as file:
+        statistics = pickle.load(file)
+    # The observation statistics went on from the checkpoint's 2,048 steps (restarted, they would count about 2,048)
+    assert statistics.obs_rms.count > 4000
+
+
 def test_resume_keeps_the_budget(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     with monkeypatch.context() as patch:
         interrupt_after_checkpoint(patch, 1000)
