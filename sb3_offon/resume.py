@@ -21,8 +21,9 @@ What differs from an uninterrupted run, by design:
   reset observation: use checkpoints without that option where this matters.
 
 Layout: ``<folder>/latest`` names the newest complete checkpoint, a sub-folder ``<folder>/<num_timesteps>/`` holding
-``model.zip``, ``replay_buffer.pkl``, ``evaluations.npz``, the joined monitor files, ``vecnormalize.pkl`` when the env
-is normalised, and ``checkpoint.json``. A checkpoint is written in full before ``latest`` is replaced (atomically),
+``model.zip``, ``replay_buffer.pkl``, ``evaluations.npz``, the joined monitor files, the ``VecNormalize`` statistics
+when the env is normalised (``vecnormalize.pkl``; ``<env name>/vecnormalize.pkl`` from the command line, where the zoo
+looks for them), and ``checkpoint.json``. A checkpoint is written in full before ``latest`` is replaced (atomically),
 so a run killed while writing one resumes from the one before.
 """
 
