@@ -175,7 +175,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         type=int,
         default=None,
         help="env steps between the checkpoints an interrupted run resumes from (default: every evaluation; none with "
-        "--ray-address; 0: none)",
+        "--ray-address; 0: none). A checkpoint holds the replay buffer (80-200 MB for MinAtar's): checkpoint less often "
+        "where buffers are large",
     )
     parser.add_argument("--force", action="store_true", help="redo finished runs that were made with other settings")
     parser.add_argument("--dry-run", action="store_true", help="list the runs and their commands, run nothing")
