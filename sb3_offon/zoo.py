@@ -12,6 +12,9 @@ files the default ``-conf``:
 - ``-conf paper`` (any name of a sub-folder of ``sb3_offon/hyperparams``): ``sb3_offon/hyperparams/paper/{algo}.yml``,
   the paper's own settings, found inside the installed package;
 - any other ``-conf`` (a YAML or Python file, a module): the zoo's behaviour, untouched.
+
+Its experiment manager (:class:`OffOnExperimentManager`) also writes checkpoints and resumes runs from them
+(``--checkpoint-freq``, ``--resume``).
 """
 
 import inspect
@@ -113,7 +116,9 @@ def checkpoint_folder(resume: str | None) -> str | None:
 
 class OffOnExperimentManager(ExperimentManager):
     """
-    The zoo's ``ExperimentManager``, reading this package's hyperparameter files by default (see :func:`resolve_config`).
+    The zoo's ``ExperimentManager``, reading this package's hyperparameter files by default (see :func:`resolve_config`),
+    and writing the checkpoints of ``--checkpoint-freq`` and going on from them with ``--resume``
+    (:mod:`sb3_offon.resume`).
 
     The resolved path is also written back to ``args.conf_file``, so that the run's ``args.yml`` names the file
     that was actually read.
