@@ -378,7 +378,10 @@ def train_command(spec: dict, log_folder: str) -> list[str]:
 # ----------------------------------------------------------------------------------------------------------------------
 def run_one(spec: dict) -> dict:
     """
-    Train one run in a fresh temporary folder and return its kept files.
+    Train one run in a fresh scratch folder and return its kept files.
+
+    The scratch folder of a run that checkpoints sits next to its checkpoints (``<checkpoint folder>.scratch``), so that
+    a run cut off leaves it where the next attempt empties it; otherwise it is a temporary folder.
 
     :param spec: a run of :func:`build_specs`
     :return: ``spec``, ``returncode`` (None when the command could not start or timed out), ``wall_time_s`` (of this
@@ -386,7 +389,12 @@ def run_one(spec: dict) -> dict:
         steps it resumed at, if any) and ``files`` (relative path -> bytes: the zoo's run folder without models and
         replay buffers, plus ``train.log``, the tail of the output)
     """
-    scratch = Path(tempfile.mkdtemp(prefix=f"offon_{spec['algo']}_{env_folder(spec['env'])}_{spec['seed']}_"))
+    if spec.get("checkpoint_dir"):
+        scratch = Path(f"{spec['checkpoint_dir']}.scratch")
+        shutil.rmtree(scratch, ignore_errors=True)
+        scratch.mkdir(parents=True)
+    else:
+        scratch = Path(tempfile.mkdtemp(prefix=f"offon_{spec['algo']}_{env_folder(spec['env'])}_{spec['seed']}_"))
     command = train_command(spec, "logs")
     resumed_at = resume_point(Path(spec["checkpoint_dir"]), spec) if spec.get("checkpoint_dir") else []
     if resumed_at:

@@ -229,7 +229,7 @@ def test_an_interrupted_run_resumes_from_its_checkpoint(tmp_path: Path, monkeypa
     done = json.loads((run / "done.json").read_text())
     assert done["resumed_at"] == [200] and "--resume" in done["command"] and "checkpoint_dir" not in done["spec"]
     np.testing.assert_array_equal(evaluations(run)["timesteps"], [100, 200, 300])
-    assert not folder.exists()
+    assert not folder.exists() and not folder.with_name(f"{folder.name}.scratch").exists()
 
 
 def test_ray_runs_the_same_task(local_root: Path, tmp_path: Path):
