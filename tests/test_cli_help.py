@@ -71,6 +71,8 @@ def test_help_and_bad_hyperparameter_on_the_command_line(tmp_path: Path) -> None
         assert f"\n  {name} " in head, name
     assert "--hyperparams" in rest and "--algo" in rest and "offon_dqn" in rest
     assert DQN.__name__ in head
+    # The options this package adds to the zoo's: checkpoints to resume from
+    assert all(f"{option} " in rest for option in ("--checkpoint-freq", "--checkpoint-dir", "--resume"))
 
     out, err, returncode = results["bad"]
     assert returncode == 2, (out, err)
