@@ -167,20 +167,22 @@ class OffOnExperimentManager(ExperimentManager):
                 f"--resume {self.resume_dir}: the run was checkpointed with a budget of {checkpoint.total_timesteps} "
                 f"steps, this command trains {self.n_timesteps} (-n): a resumed run keeps its budget"
             )
-        evaluations = [callback for callback in self.callbacks if isinstance(callback, EvalCallback)]
-        checkpoint.prepare(model, evaluations[0] if evaluations else None)
+        checkpoint.prepare(model, self._eval_callback())
         return model, saved_hyperparams
+
+    def _eval_callback(self) -> EvalCallback | None:
+        """The run's evaluation callback, which the zoo's ``create_callbacks`` adds with ``--eval-freq`` (else None)."""
+        return next((callback for callback in self.callbacks if isinstance(callback, EvalCallback)), None)
 
     def create_callbacks(self) -> None:
         """The zoo's callbacks, then (with ``--checkpoint-freq``) a :class:`sb3_offon.resume.RunCheckpoint` after them."""
         super().create_callbacks()
         if self.checkpoint_freq > 0:
-            evaluations = [callback for callback in self.callbacks if isinstance(callback, EvalCallback)]
             self.callbacks.append(
                 RunCheckpoint(
                     self.checkpoint_dir,
                     self.checkpoint_freq,
-                    eval_callback=evaluations[0] if evaluations else None,
+                    eval_callback=self._eval_callback(),
                     monitor_dir=self.save_path,
                     resumed_from=self.resumed_from,
                     # Where the zoo's continue-training path looks for them (ExperimentManager._maybe_normalize)

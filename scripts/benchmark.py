@@ -75,7 +75,8 @@ from pathlib import Path
 import yaml
 from tqdm import tqdm
 
-# study_file.py sits next to this script: importable however it is started (as a script, or loaded from its path)
+# run_records.py and study_file.py sit next to this script: importable however it is started (as a script, or loaded
+# from its path)
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from run_records import IDENTITY, run_status, store
 from study_file import Study
@@ -331,12 +332,15 @@ def checkpoint_settings(spec: dict) -> dict:
     return {key: spec[key] for key in ("set", "algo", "env", "seed", *IDENTITY)}
 
 
-def resume_point(folder: Path, spec: dict) -> list[int]:
+def resume_point(spec: dict) -> list[int]:
     """
     The steps at which the run of ``spec`` has resumed so far, the one it would resume at now last, read from its
     checkpoint folder (:mod:`sb3_offon.resume`'s layout: ``latest`` names the newest checkpoint, whose
-    ``checkpoint.json`` holds its step); ``[]`` when there is no checkpoint made with the run's settings.
+    ``checkpoint.json`` holds its step); ``[]`` when the run writes no checkpoints or has none made with its settings.
     """
+    if not spec.get("checkpoint_dir"):
+        return []
+    folder = Path(spec["checkpoint_dir"])
     recorded, latest = folder / "spec.json", folder / "latest"
     try:
         if json.loads(recorded.read_text()) != checkpoint_settings(spec):
@@ -396,7 +400,7 @@ def run_one(spec: dict) -> dict:
     else:
         scratch = Path(tempfile.mkdtemp(prefix=f"offon_{spec['algo']}_{env_folder(spec['env'])}_{spec['seed']}_"))
     command = train_command(spec, "logs")
-    resumed_at = resume_point(Path(spec["checkpoint_dir"]), spec) if spec.get("checkpoint_dir") else []
+    resumed_at = resume_point(spec)
     if resumed_at:
         command += ["--resume", spec["checkpoint_dir"]]
     elif spec.get("checkpoint_dir"):
@@ -567,7 +571,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     if args.dry_run:
         for spec in todo:
-            resumed_at = resume_point(Path(spec["checkpoint_dir"]), spec) if spec.get("checkpoint_dir") else []
+            resumed_at = resume_point(spec)
             resume = f" (resumes at step {resumed_at[-1]})" if resumed_at else ""
             print(" ".join(["python", *train_command(spec, "<scratch>")]), "->", f"{run_dir(args.root, spec)}{resume}")
         return 0

@@ -220,8 +220,8 @@ def test_an_interrupted_run_resumes_from_its_checkpoint(tmp_path: Path, monkeypa
     with monkeypatch.context() as patch:
         interrupt_after_checkpoint(patch, 200)
         train_main()
-    assert module.resume_point(folder, spec) == [200]
-    assert module.resume_point(folder, {**spec, "eval_episodes": 3}) == []  # made with other settings: not resumed
+    assert module.resume_point(spec) == [200]
+    assert module.resume_point({**spec, "eval_episodes": 3}) == []  # made with other settings: not resumed
     assert "(resumes at step 200)" in check(benchmark(root, *arguments, "--dry-run"))
     output = check(benchmark(root, *arguments))
     assert "(resumed at step 200)" in output
