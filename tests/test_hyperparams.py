@@ -11,13 +11,13 @@ import rl_zoo3
 import yaml
 from rl_zoo3.exp_manager import ExperimentManager
 from rl_zoo3.hyperparams_opt import HYPERPARAMS_CONVERTER, HYPERPARAMS_SAMPLER
-from sb3_contrib import QRDQN
 from stable_baselines3 import DQN
 
 from sb3_offon import OffOnDQN
 from sb3_offon.callbacks import GoalCountCallback, StopOnMeanTrainingReward
 from sb3_offon.minatar_envs import minatar_ids
 from sb3_offon.offon_dqn.offon_dqn import OFFON_PARAMETERS
+from sb3_offon.qrdqn import QRDQN
 from sb3_offon.variants import DQNMC, DQNSarsa
 from sb3_offon.zoo import ALGOS, ALIASES, HYPERPARAMS_DIR, SAMPLERS, register, resolve_config
 

@@ -1,0 +1,3 @@
+from sb3_offon.qrdqn.qrdqn import QRDQN
+
+__all__ = ["QRDQN"]

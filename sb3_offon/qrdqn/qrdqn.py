@@ -1,0 +1,57 @@
+"""
+sb3-contrib's QR-DQN with its quantile Huber loss computed in one pass (:mod:`sb3_offon.common.quantile_loss`): the same
+algorithm, arguments, saved files and results to float rounding, about three times the env steps per second on a CPU
+when it trains every 4 steps on MinAtar (its loss was most of each gradient step).
+"""
+
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+import sb3_contrib
+from sb3_contrib.qrdqn import qrdqn as sb3_contrib_qrdqn
+
+from sb3_offon.common.quantile_loss import quantile_huber_loss
+
+_swap_lock = threading.Lock()
+_trainings_in_progress = 0
+_sb3_contrib_loss = sb3_contrib_qrdqn.quantile_huber_loss
+
+
+@contextmanager
+def _fused_quantile_huber_loss() -> Iterator[None]:
+    """
+    sb3-contrib's ``QRDQN.train`` calls the loss by its module's global name: point that name at the fused loss while
+    one of these models trains, so that ``train`` itself stays sb3-contrib's (nothing copied). The first training to
+    start swaps it and the last to end puts the original back, so models training in threads do not undo each other.
+    Any sb3-contrib QRDQN that trains meanwhile gets the fused loss too: the same values, sooner.
+    """
+    global _trainings_in_progress
+    with _swap_lock:
+        if _trainings_in_progress == 0:
+            sb3_contrib_qrdqn.quantile_huber_loss = quantile_huber_loss
+        _trainings_in_progress += 1
+    try:
+        yield
+    finally:
+        with _swap_lock:
+            _trainings_in_progress -= 1
+            if _trainings_in_progress == 0:
+                sb3_contrib_qrdqn.quantile_huber_loss = _sb3_contrib_loss
+
+
+class QRDQN(sb3_contrib.QRDQN):
+    """
+    Quantile Regression Deep Q-Network (QR-DQN), sb3-contrib's, with a faster loss: every argument, method and saved
+    file is sb3-contrib's ``QRDQN``'s; only the quantile Huber loss of ``train`` is computed in one pass with its
+    gradient in closed form (:class:`sb3_offon.common.quantile_loss.QuantileHuberLoss`). A model saved by either class
+    loads with the other.
+
+    Paper: https://arxiv.org/abs/1710.10044
+
+    The constructor is sb3-contrib's: ``QRDQN(policy, env, ...)`` with the same arguments and defaults.
+    """
+
+    def train(self, gradient_steps: int, batch_size: int = 100) -> None:
+        with _fused_quantile_huber_loss():
+            super().train(gradient_steps, batch_size)
