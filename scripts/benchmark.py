@@ -78,7 +78,7 @@ from tqdm import tqdm
 # run_records.py and study_file.py sit next to this script: importable however it is started (as a script, or loaded
 # from its path)
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from run_records import IDENTITY, run_status, store
+from run_records import IDENTITY, read_evaluations, run_status, stopped_at, store
 from study_file import Study
 
 ALGOS = ["offon_paper", "dqn_mc", "dqn_sarsa", "dqn"]
@@ -433,8 +433,10 @@ def run_one(spec: dict) -> dict:
                 files[path.relative_to(zoo_runs[-1]).as_posix()] = path.read_bytes()
     lines = (scratch / "train.log").read_text(errors="replace").splitlines()
     files["train.log"] = ("\n".join(lines[-LOG_TAIL_LINES:]) + "\n").encode()
+    # A run cut short keeps its checkpoints for the next attempt, even where it exited with 0 (the zoo does on Ctrl-C)
+    whole_way = zoo_runs and stopped_at(read_evaluations(zoo_runs[-1]), spec) is None
     shutil.rmtree(scratch, ignore_errors=True)
-    if returncode == 0 and spec.get("checkpoint_dir"):
+    if returncode == 0 and whole_way and spec.get("checkpoint_dir"):
         shutil.rmtree(spec["checkpoint_dir"], ignore_errors=True)
     return {
         "spec": {key: value for key, value in spec.items() if key != "checkpoint_dir"},  # a path of this machine

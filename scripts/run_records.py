@@ -22,6 +22,19 @@ def read_evaluations(folder: Path) -> dict[str, np.ndarray] | None:
         return None
 
 
+def stopped_at(evaluations: dict[str, np.ndarray] | None, spec: dict) -> int | None:
+    """
+    The step of the last evaluation of a run that stopped before its budget, None for a run that went the whole way.
+
+    A run that reached ``n_timesteps`` has evaluated within its last ``eval_freq`` steps; one whose last evaluation is
+    older was cut short, whatever its return code (the zoo saves and exits with 0 on Ctrl-C).
+    """
+    if evaluations is None or len(evaluations.get("timesteps", [])) == 0:
+        return 0
+    last = int(evaluations["timesteps"][-1])
+    return last if last + spec["eval_freq"] <= spec["n_timesteps"] else None
+
+
 def run_status(folder: Path, spec: dict) -> str:
     """``"todo"`` (no folder, or an unfinished one), ``"finished"``, or ``"conflict"`` (finished with other settings)."""
     try:
@@ -61,7 +74,9 @@ def store(result: dict, folder: Path, code_version: dict[str, str]) -> tuple[boo
         (partial / name).write_bytes(data)
     evaluations = read_evaluations(partial) if "evaluations.npz" in files else None
     n_evaluations = 0 if evaluations is None else len(evaluations["timesteps"])
-    ok = result["returncode"] == 0 and n_evaluations > 0 and any(name.endswith("monitor.csv") for name in files)
+    stopped = stopped_at(evaluations, spec) if n_evaluations else None
+    monitored = any(name.endswith("monitor.csv") for name in files)
+    ok = result["returncode"] == 0 and n_evaluations > 0 and stopped is None and monitored
     record = {key: value for key, value in result.items() if key != "files"}
     record.update(n_evaluations=n_evaluations, files=sorted(files), code_version=code_version)
     if n_evaluations:
@@ -77,6 +92,11 @@ def store(result: dict, folder: Path, code_version: dict[str, str]) -> tuple[boo
         last = record["last_evaluation"]["mean_return"]
         resumed = f" (resumed at step {', '.join(map(str, result['resumed_at']))})" if result.get("resumed_at") else ""
         return True, f"done   {name} in {result['wall_time_s']:.1f} s{resumed}, last evaluation {last:.1f}"
-    reason = f"return code {result['returncode']}" if result["returncode"] != 0 else "no evaluation or monitor file"
+    if result["returncode"] != 0:
+        reason = f"return code {result['returncode']}"
+    elif stopped is not None:
+        reason = f"stopped after its evaluation at step {stopped} of {spec['n_timesteps']}"
+    else:
+        reason = "no evaluation or monitor file"
     tail = "\n    ".join(files["train.log"].decode(errors="replace").splitlines()[-15:])
     return False, f"FAILED {name} ({reason}) after {result['wall_time_s']:.1f} s, see {folder / 'train.log'}:\n    {tail}"

@@ -232,6 +232,39 @@ def test_an_interrupted_run_resumes_from_its_checkpoint(tmp_path: Path, monkeypa
     assert not folder.exists() and not folder.with_name(f"{folder.name}.scratch").exists()
 
 
+FAKE_RUN = """
+import pathlib, sys
+import numpy as np
+folder = pathlib.Path("logs/dqn/CartPole-v1_1")
+folder.mkdir(parents=True)
+steps = [int(step) for step in sys.argv[1:]]
+scores = np.ones((len(steps), 2))
+np.savez(folder / "evaluations.npz", timesteps=np.array(steps), results=scores, ep_lengths=scores)
+(folder / "0.monitor.csv").write_text("#\\nr,l,t\\n")
+"""
+
+
+def test_a_run_that_stops_short_with_return_code_0_keeps_its_checkpoints(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
+    module = load_script("benchmark")
+    root = tmp_path / "raw"
+    arguments = ["--envs", ENV, "--seeds", "1", "--algos", "dqn"]
+    (spec,) = module.build_specs(module.parse_args([*GRID, "--root", str(root), *arguments]))
+    folder = Path(spec["checkpoint_dir"])
+    for steps, whole_way in [(["100"], False), (["100", "200"], False), (["100", "200", "300"], True)]:
+        # A stand-in for the training process: it exits with 0 after writing evaluations up to steps[-1] of 300 (as the
+        # zoo does after a Ctrl-C)
+        module.start_checkpoints(folder, spec)
+        monkeypatch.setattr(module, "train_command", lambda spec, log_folder, steps=steps: ["-c", FAKE_RUN, *steps])
+        result = module.run_one(spec)
+        assert result["returncode"] == 0
+        ok, message = module.store(result, module.run_dir(root, spec), {})
+        assert ok == whole_way and folder.exists() != whole_way, steps
+        if not whole_way:
+            assert f"stopped after its evaluation at step {steps[-1]} of 300" in message
+            assert (module.run_dir(root, spec) / "failed.json").is_file()
+    assert module.run_status(module.run_dir(root, spec), spec) == "finished"
+
+
 def test_ray_runs_the_same_task(local_root: Path, tmp_path: Path):
     pytest.importorskip("ray")
     root = tmp_path / "raw"

@@ -22,11 +22,15 @@ def loss_and_gradient(loss_fn, current: th.Tensor, target: th.Tensor, **kwargs) 
 
 
 @pytest.mark.parametrize("dtype", [th.float32, th.float64])
+@pytest.mark.parametrize("scale", [0.3, 2.0, 50.0])  # most pairs within the Huber threshold, some, nearly none
 @pytest.mark.parametrize("batch_size, n_quantiles, n_target_quantiles", [(32, 200, 200), (5, 7, 11), (1, 1, 3)])
-def test_fused_loss_is_sb3_contribs(dtype: th.dtype, batch_size: int, n_quantiles: int, n_target_quantiles: int) -> None:
+def test_fused_loss_is_sb3_contribs(
+    dtype: th.dtype, scale: float, batch_size: int, n_quantiles: int, n_target_quantiles: int
+) -> None:
     generator = th.Generator().manual_seed(batch_size * n_quantiles)
-    current = (th.randn(batch_size, n_quantiles, generator=generator) * 2).to(dtype)
-    target = (th.randn(batch_size, n_target_quantiles, generator=generator) * 2).to(dtype)
+    current = (th.randn(batch_size, n_quantiles, generator=generator) * scale).to(dtype)
+    # Returns of 50 and more (MinAtar's) around quantiles of that size: float32 sums of squares would lose the loss
+    target = (th.randn(batch_size, n_target_quantiles, generator=generator) * scale + scale).to(dtype)
     ours, ours_grad = loss_and_gradient(quantile_huber_loss, current, target)
     theirs, theirs_grad = loss_and_gradient(sb3_contrib_loss, current, target)
     tolerance = 1e-5 if dtype == th.float32 else 1e-7  # sb3-contrib's quantile fractions are float32 in any case
@@ -43,6 +47,11 @@ def test_fused_loss_at_the_huber_threshold_and_at_zero() -> None:
     target = th.tensor([[0.0, 1.0, 1.0, -1.0, 2.0], [2.0, 4.0, 3.0, -3.0, 0.0]], dtype=th.float64)
     ours, ours_grad = loss_and_gradient(quantile_huber_loss, current, target)
     theirs, theirs_grad = loss_and_gradient(sb3_contrib_loss, current, target)
+    assert th.allclose(ours, theirs, rtol=1e-7) and th.allclose(ours_grad, theirs_grad, rtol=1e-7, atol=1e-12)
+    # Equal targets (ties in the sort), some of them equal to current quantiles
+    repeated = th.tensor([[1.0, 1.0, 1.0, 0.0, 0.0], [-3.0, 3.0, 3.0, 3.0, -3.0]], dtype=th.float64)
+    ours, ours_grad = loss_and_gradient(quantile_huber_loss, current, repeated)
+    theirs, theirs_grad = loss_and_gradient(sb3_contrib_loss, current, repeated)
     assert th.allclose(ours, theirs, rtol=1e-7) and th.allclose(ours_grad, theirs_grad, rtol=1e-7, atol=1e-12)
     # By hand: one quantile (tau = 1/2) at 0 and one target at 1: delta = 1 >= 0, weight tau, Huber loss 1/2;
     # its gradient is -tau * clip(delta) = -1/2. With the target at -3: weight 1 - tau, Huber 3 - 1/2, gradient 1/2.
