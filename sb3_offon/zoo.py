@@ -49,7 +49,8 @@ HYPERPARAMS_DIR = Path(__file__).resolve().parent / "hyperparams"
 # The names are the contract of the command line and of the log folders (logs/{algo}/...). ``dqn_nstep`` is SB3's own
 # DQN under a name of its own, so that its settings (the zoo's DQN entries plus ``n_steps``) and its logs are apart
 # from plain DQN's. The zoo already registers ``dqn`` and ``qrdqn`` (sb3-contrib); this package bundles their settings,
-# and ``qrdqn`` trains sb3_offon.qrdqn.QRDQN, sb3-contrib's QR-DQN with its loss computed in one pass (same results).
+# and ``qrdqn`` trains sb3_offon.qrdqn.QRDQN, sb3-contrib's QR-DQN with its loss computed from sorted
+# targets (the same results, about four times the steps per second on MinAtar).
 # Every OffOnDQN name differs only in the target settings its YAML file writes out: ``offon_dqn`` is what
 # ``OffOnDQN(policy, env)`` trains (its defaults), ``offon_paper`` the paper's coin flips, ``offon_mc_decay`` and
 # ``offon_watkins`` two configurations of the search.
@@ -78,7 +79,7 @@ ALGO_SUMMARIES: dict[str, str] = {
     "dqn_nstep": "SB3's DQN with n-step returns (n in the YAML)",
     "offon_mc_decay": "the search's first choice: coin flips, delta1 0.99 -> 0.01, no Sarsa",
     "offon_watkins": "lambda-returns, lambda 0.9, Watkins's Q(lambda)",
-    "qrdqn": "sb3-contrib's QR-DQN, its loss computed in one pass (same results, faster)",
+    "qrdqn": "sb3-contrib's QR-DQN, its loss from sorted targets (same results, faster)",
     **{alias: f"former name of {name}" for alias, name in ALIASES.items()},
 }
 

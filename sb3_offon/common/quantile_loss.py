@@ -24,8 +24,8 @@ class QuantileHuberLoss(th.autograd.Function):
     target quantiles, with its gradient with respect to the current quantiles only (the targets are constants).
 
     For one sample, current quantile theta with fraction tau = (i + 0.5) / N, and the differences d = T - theta to its
-    targets T: each pair costs (1 - tau) h(d) where d < 0 and tau h(d) where d >= 0, with h(d) = d^2 / 2 where |d| <= 1
-    and |d| - 1/2 beyond. The targets fall in four pieces: A, T < theta - 1 (cost (1 - tau)(theta - T - 1/2)); B,
+    targets T: each pair costs (1 - tau) h(d) where d < 0 and tau h(d) where d >= 0, with h(d) = d^2 / 2 where abs(d) <= 1
+    and abs(d) - 1/2 beyond. The targets fall in four pieces: A, T < theta - 1 (cost (1 - tau)(theta - T - 1/2)); B,
     theta - 1 <= T < theta ((1 - tau)(T - theta)^2 / 2); C, theta <= T <= theta + 1 (tau (T - theta)^2 / 2); D,
     T > theta + 1 (tau (T - theta - 1/2)). Each piece's sum needs only its count n and its sums S1 of T and S2 of T^2,
     read off the prefix sums of the sorted targets; the derivative with respect to theta is (1 - tau) n_A -

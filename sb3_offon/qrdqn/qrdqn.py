@@ -1,7 +1,8 @@
 """
-sb3-contrib's QR-DQN with its quantile Huber loss computed in one pass (:mod:`sb3_offon.common.quantile_loss`): the same
-algorithm, arguments, saved files and results to float rounding, about three times the env steps per second on a CPU
-when it trains every 4 steps on MinAtar (its loss was most of each gradient step).
+sb3-contrib's QR-DQN with its quantile Huber loss computed from sorted targets (:mod:`sb3_offon.common.quantile_loss`):
+the same algorithm, arguments, saved files and results to float rounding, at about four times the env steps per second
+on one CPU thread when it trains every 4 steps on MinAtar (sb3-contrib's loss was most of each gradient step; the
+figures: docs/qrdqn.md).
 """
 
 import threading
@@ -43,8 +44,8 @@ def _fused_quantile_huber_loss() -> Iterator[None]:
 class QRDQN(sb3_contrib.QRDQN):
     """
     Quantile Regression Deep Q-Network (QR-DQN), sb3-contrib's, with a faster loss: every argument, method and saved
-    file is sb3-contrib's ``QRDQN``'s; only the quantile Huber loss of ``train`` is computed in one pass with its
-    gradient in closed form (:class:`sb3_offon.common.quantile_loss.QuantileHuberLoss`). A model saved by either class
+    file is sb3-contrib's ``QRDQN``'s; only the quantile Huber loss of ``train`` is computed from sorted targets, with
+    its gradient in closed form (:class:`sb3_offon.common.quantile_loss.QuantileHuberLoss`). A model saved by either class
     loads with the other.
 
     Paper: https://arxiv.org/abs/1710.10044
