@@ -58,7 +58,6 @@ import concurrent.futures
 import functools
 import importlib.metadata
 import importlib.util
-import json
 import os
 import platform
 import shutil
@@ -78,7 +77,18 @@ from tqdm import tqdm
 # run_records.py and study_file.py sit next to this script: importable however it is started (as a script, or loaded
 # from its path)
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from run_records import IDENTITY, read_evaluations, run_status, stopped_at, store
+from run_records import (
+    IDENTITY,
+    checkpoint_dir,
+    env_folder,
+    read_evaluations,
+    resume_point,
+    run_dir,
+    run_status,
+    start_checkpoints,
+    stopped_at,
+    store,
+)
 from study_file import Study
 
 ALGOS = ["offon_paper", "dqn_mc", "dqn_sarsa", "dqn"]
@@ -309,53 +319,6 @@ def default_device(policy: str) -> str:
     """Small MLPs train faster on one CPU thread per run than sharing a GPU (about 5x, measured: README, Speed); CNNs
     the other way round."""
     return "cpu" if policy == "MlpPolicy" else "auto"
-
-
-def env_folder(env: str) -> str:
-    """An env id as a folder name, as the zoo writes it: ``MinAtar/Breakout-v0`` -> ``MinAtar-Breakout-v0``."""
-    return env.replace("/", "-")
-
-
-def run_dir(root: Path, spec: dict) -> Path:
-    """``<root>/<grid>/<algo>/<env>_<seed>``; a study's ``run_names`` keep a renamed algorithm in its runs' folder."""
-    folder = spec.get("run_name", spec["algo"])
-    return root / spec.get("grid", spec["set"]) / folder / f"{env_folder(spec['env'])}_{spec['seed']}"
-
-
-def checkpoint_dir(root: Path, spec: dict) -> Path:
-    """Where a run's checkpoints go: ``<root>/.checkpoints/<grid>/<algo>/<env>_<seed>`` (a hidden folder git ignores)."""
-    return root / ".checkpoints" / run_dir(root, spec).relative_to(root)
-
-
-def checkpoint_settings(spec: dict) -> dict:
-    """What a checkpoint must have been made with to be resumed by the run of ``spec``."""
-    return {key: spec[key] for key in ("set", "algo", "env", "seed", *IDENTITY)}
-
-
-def resume_point(spec: dict) -> list[int]:
-    """
-    The steps at which the run of ``spec`` has resumed so far, the one it would resume at now last, read from its
-    checkpoint folder (:mod:`sb3_offon.resume`'s layout: ``latest`` names the newest checkpoint, whose
-    ``checkpoint.json`` holds its step); ``[]`` when the run writes no checkpoints or has none made with its settings.
-    """
-    if not spec.get("checkpoint_dir"):
-        return []
-    folder = Path(spec["checkpoint_dir"])
-    recorded, latest = folder / "spec.json", folder / "latest"
-    try:
-        if json.loads(recorded.read_text()) != checkpoint_settings(spec):
-            return []
-        state = json.loads((folder / latest.read_text().strip() / "checkpoint.json").read_text())
-    except (OSError, ValueError):
-        return []
-    return [*state["resumed_at"], state["num_timesteps"]]
-
-
-def start_checkpoints(folder: Path, spec: dict) -> None:
-    """Empty a run's checkpoint folder (it may hold another run's) and record the run's settings in it."""
-    shutil.rmtree(folder, ignore_errors=True)
-    folder.mkdir(parents=True)
-    (folder / "spec.json").write_text(json.dumps(checkpoint_settings(spec), indent=2) + "\n")
 
 
 def run_threads(spec: dict) -> str:

@@ -1,6 +1,7 @@
 """
-The run folders of a grid (``scripts/benchmark.py``): which runs are finished, and how a run's files and its record
-(``done.json`` or ``failed.json``) are written.
+The run folders of a grid (``scripts/benchmark.py``): where a run's folder and its checkpoints are, which runs are
+finished, where an unfinished one resumes, and how a run's files and its record (``done.json`` or ``failed.json``) are
+written.
 """
 
 import json
@@ -12,6 +13,53 @@ import numpy as np
 # The runs' own settings that define a result: a finished run made with other values is not the requested run
 IDENTITY = ("n_timesteps", "eval_freq", "eval_episodes", "hyperparams")
 DONE, FAILED = "done.json", "failed.json"
+
+
+def env_folder(env: str) -> str:
+    """An env id as a folder name, as the zoo writes it: ``MinAtar/Breakout-v0`` -> ``MinAtar-Breakout-v0``."""
+    return env.replace("/", "-")
+
+
+def run_dir(root: Path, spec: dict) -> Path:
+    """``<root>/<grid>/<algo>/<env>_<seed>``; a study's ``run_names`` keep a renamed algorithm in its runs' folder."""
+    folder = spec.get("run_name", spec["algo"])
+    return root / spec.get("grid", spec["set"]) / folder / f"{env_folder(spec['env'])}_{spec['seed']}"
+
+
+def checkpoint_dir(root: Path, spec: dict) -> Path:
+    """Where a run's checkpoints go: ``<root>/.checkpoints/<grid>/<algo>/<env>_<seed>`` (a hidden folder git ignores)."""
+    return root / ".checkpoints" / run_dir(root, spec).relative_to(root)
+
+
+def checkpoint_settings(spec: dict) -> dict:
+    """What a checkpoint must have been made with to be resumed by the run of ``spec``."""
+    return {key: spec[key] for key in ("set", "algo", "env", "seed", *IDENTITY)}
+
+
+def resume_point(spec: dict) -> list[int]:
+    """
+    The steps at which the run of ``spec`` has resumed so far, the one it would resume at now last, read from its
+    checkpoint folder (:mod:`sb3_offon.resume`'s layout: ``latest`` names the newest checkpoint, whose
+    ``checkpoint.json`` holds its step); ``[]`` when the run writes no checkpoints or has none made with its settings.
+    """
+    if not spec.get("checkpoint_dir"):
+        return []
+    folder = Path(spec["checkpoint_dir"])
+    recorded, latest = folder / "spec.json", folder / "latest"
+    try:
+        if json.loads(recorded.read_text()) != checkpoint_settings(spec):
+            return []
+        state = json.loads((folder / latest.read_text().strip() / "checkpoint.json").read_text())
+    except (OSError, ValueError):
+        return []
+    return [*state["resumed_at"], state["num_timesteps"]]
+
+
+def start_checkpoints(folder: Path, spec: dict) -> None:
+    """Empty a run's checkpoint folder (it may hold another run's) and record the run's settings in it."""
+    shutil.rmtree(folder, ignore_errors=True)
+    folder.mkdir(parents=True)
+    (folder / "spec.json").write_text(json.dumps(checkpoint_settings(spec), indent=2) + "\n")
 
 
 def read_evaluations(folder: Path) -> dict[str, np.ndarray] | None:

@@ -29,7 +29,6 @@ import matplotlib.pyplot as plt
 import numpy as np
 import plot
 import selection
-from benchmark import env_folder
 from rule import (
     final_difference,
     interval,
@@ -38,6 +37,7 @@ from rule import (
     study_runs,
     verdict,
 )
+from run_records import env_folder
 from run_stats import evaluation_curves, mean_ci
 from scipy import stats
 from study_file import MINMAX, Study

@@ -13,6 +13,7 @@ import json
 import subprocess
 import sys
 from pathlib import Path
+from types import ModuleType
 
 import numpy as np
 import pytest
@@ -206,12 +207,19 @@ def test_resume_redoes_only_the_unfinished_run(local_root: Path):
         np.testing.assert_array_equal(evaluations(folders[1])[key], values)
 
 
-def test_an_interrupted_run_resumes_from_its_checkpoint(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
+ONE_RUN = ["--envs", ENV, "--seeds", "1", "--algos", "dqn"]
+
+
+def one_run(root: Path) -> tuple[ModuleType, dict, Path]:
+    """The runner as a module, the spec of DQN's run on seed 0 under ``root``, and its checkpoint folder."""
     module = load_script("benchmark")
-    root = tmp_path / "raw"
-    arguments = ["--envs", ENV, "--seeds", "1", "--algos", "dqn"]
-    (spec,) = module.build_specs(module.parse_args([*GRID, "--root", str(root), *arguments]))
-    folder = Path(spec["checkpoint_dir"])
+    (spec,) = module.build_specs(module.parse_args([*GRID, "--root", str(root), *ONE_RUN]))
+    return module, spec, Path(spec["checkpoint_dir"])
+
+
+def test_an_interrupted_run_resumes_from_its_checkpoint(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
+    root, arguments = tmp_path / "raw", ONE_RUN
+    module, spec, folder = one_run(root)
     assert folder == (root / ".checkpoints" / "paper" / "dqn" / f"{ENV}_0").resolve() and spec["checkpoint_freq"] == 100
     # The run as the runner starts it, stopped (Ctrl-C) after its checkpoint of step 200
     module.start_checkpoints(folder, spec)
@@ -245,11 +253,8 @@ np.savez(folder / "evaluations.npz", timesteps=np.array(steps), results=scores, 
 
 
 def test_a_run_that_stops_short_with_return_code_0_keeps_its_checkpoints(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
-    module = load_script("benchmark")
     root = tmp_path / "raw"
-    arguments = ["--envs", ENV, "--seeds", "1", "--algos", "dqn"]
-    (spec,) = module.build_specs(module.parse_args([*GRID, "--root", str(root), *arguments]))
-    folder = Path(spec["checkpoint_dir"])
+    module, spec, folder = one_run(root)
     for steps, whole_way in [(["100"], False), (["100", "200"], False), (["100", "200", "300"], True)]:
         # A stand-in for the training process: it exits with 0 after writing evaluations up to steps[-1] of 300 (as the
         # zoo does after a Ctrl-C)
