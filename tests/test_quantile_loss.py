@@ -11,7 +11,7 @@ from sb3_contrib.qrdqn import qrdqn as sb3_contrib_qrdqn
 
 from sb3_offon.common.quantile_loss import quantile_huber_loss
 from sb3_offon.qrdqn import QRDQN
-from sb3_offon.zoo import ALGOS
+from sb3_offon.zoo import ALGOS, register
 
 
 def loss_and_gradient(loss_fn, current: th.Tensor, target: th.Tensor, **kwargs) -> tuple[th.Tensor, th.Tensor]:
@@ -137,4 +137,7 @@ def test_saved_models_load_with_either_class(tmp_path) -> None:
 
 
 def test_the_command_line_trains_this_qrdqn() -> None:
-    assert ALGOS["qrdqn"] is QRDQN
+    import rl_zoo3.train
+
+    register()  # what python -m sb3_offon.train does before parsing its arguments
+    assert ALGOS["qrdqn"] is QRDQN and rl_zoo3.train.ALGOS["qrdqn"] is QRDQN
