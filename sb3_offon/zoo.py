@@ -197,7 +197,11 @@ class OffOnExperimentManager(ExperimentManager):
             )
 
     def _learn_the_rest(self, model: BaseAlgorithm) -> None:
-        """The zoo's ``learn`` (its logging interval, callbacks, Ctrl-C and clean-up) for the steps left to a resumed run."""
+        """
+        The zoo's ``learn`` (its logging interval, callbacks, Ctrl-C and clean-up) for the steps left to a resumed run.
+        Repeated rather than called: the zoo's calls ``model.learn(n_timesteps)`` without ``reset_num_timesteps``, and
+        a ``learn`` set on the model to add it would be pickled into every checkpoint the model saves.
+        """
         kwargs: dict[str, Any] = {}
         if self.log_interval > -1:
             kwargs["log_interval"] = self.log_interval
