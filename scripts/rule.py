@@ -14,7 +14,8 @@ Each criterion of a study's ``rule`` is of one kind:
 - ``auc_apart_above`` (``reference``, ``at_least``): on at least that many envs, the 95% interval of the candidate's
   mean AUC lies wholly above the reference's.
 
-The verdict is "holds" when every criterion holds, "does not hold" otherwise, and "incomplete" while runs are missing.
+The verdict is "holds" when every criterion holds, "does not hold" otherwise, and "incomplete" while runs the rule reads
+are missing (:func:`rule_algos`: those of other algorithms, reported against but not judged by, cannot change it).
 """
 
 from dataclasses import replace
@@ -72,9 +73,22 @@ def complete(study: Study, runs: dict, env: str, algo: str) -> bool:
     return len(runs.get(env, {}).get(algo, [])) == len(study.seeds_for(algo, env))
 
 
-def missing_runs(study: Study, runs: dict) -> int:
-    expected = sum(len(study.seeds_for(algo, env)) for algo in study.algos for env in study.envs_for(algo))
-    return expected - sum(len(by_algo.get(algo, [])) for by_algo in runs.values() for algo in study.algos)
+def missing_runs(study: Study, runs: dict, algos: list[str] | None = None) -> int:
+    """How many runs of ``algos`` (default: every algorithm of the study) are not in ``runs``."""
+    algos = list(study.algos) if algos is None else algos
+    expected = sum(len(study.seeds_for(algo, env)) for algo in algos for env in study.envs_for(algo))
+    return expected - sum(len(by_algo.get(algo, [])) for by_algo in runs.values() for algo in algos)
+
+
+def rule_algos(study: Study) -> list[str]:
+    """
+    The algorithms whose runs the rule reads: the candidate and its criteria's references; every algorithm of the
+    study where the normalisation is taken over all their runs (``minmax``). The verdict waits for these runs only:
+    the others' (``also_against``) cannot change it.
+    """
+    if study.normalisation == MINMAX:
+        return list(study.algos)
+    return list(dict.fromkeys([study.candidate, *(criterion["reference"] for criterion in study.rule)]))
 
 
 def normalised(study: Study, runs: dict, scores: dict, algo: str, measure: str) -> np.ndarray | None:
@@ -245,7 +259,7 @@ def verdict(study: Study, runs: dict, scores: dict) -> tuple[str, list[str]]:
         return "no rule", []
     results = [judge_criterion(study, runs, scores, criterion, study.candidate) for criterion in study.rule]
     lines = [f"{'holds' if ok else 'does not hold' if ok is not None else 'open'}: {text}" for ok, text in results]
-    missing = missing_runs(study, runs)
+    missing = missing_runs(study, runs, rule_algos(study))
     if missing or any(ok is None for ok, _ in results):
         return f"incomplete ({missing} runs missing)", lines
     return ("holds" if all(ok for ok, _ in results) else "does not hold"), lines

@@ -103,6 +103,29 @@ def test_missing_runs_leave_the_verdict_open(tmp_path: Path) -> None:
     assert all(line.startswith("open:") for line in lines)
 
 
+def test_the_verdict_waits_only_for_the_runs_its_rule_reads(tmp_path: Path) -> None:
+    study_module = load_script("study")
+    path, root = write_study(tmp_path, {env: [3.0, 4.0, 5.0, 6.0] for env in ENVS})
+    # QR-DQN is reported against, not judged by: none of its runs is in yet, and one of DQN's is gone
+    with_other = {**STUDY, "algos": [*STUDY["algos"], "qrdqn"], "also_against": ["qrdqn"]}
+    path.write_text(yaml.safe_dump(with_other))
+    study = study_module.Study.read(path)
+    decision, lines = study_module.verdict(study, *study_module.study_runs(study, root))
+    assert decision == "holds", lines
+    table = study_module.report(study, root, tmp_path / "report")
+    text = (tmp_path / "report" / "table.md").read_text()
+    assert table == "holds" and "**Verdict: holds.**" in text and "  - open: " in text  # against QR-DQN: open
+    (root / "toy" / "dqn" / "Acrobot-v1_4" / "done.json").unlink()
+    decision, _ = study_module.verdict(study, *study_module.study_runs(study, root))
+    assert decision == "incomplete (1 runs missing)"
+    # Normalised over every algorithm's runs (minmax), QR-DQN's runs change the candidate's scores: the verdict waits
+    path.write_text(yaml.safe_dump({**with_other, "normalisation": "minmax"}))
+    write_study(tmp_path / "again", {env: [3.0, 4.0, 5.0, 6.0] for env in ENVS})
+    study = study_module.Study.read(path)
+    decision, _ = study_module.verdict(study, *study_module.study_runs(study, tmp_path / "again" / "raw"))
+    assert decision == "incomplete (8 runs missing)"
+
+
 def test_setup_check_against_a_random_policy(tmp_path: Path) -> None:
     study_module = load_script("study")
     path, root = write_study(tmp_path, {env: [3.0, 4.0, 5.0, 6.0] for env in ENVS})
