@@ -60,6 +60,17 @@ def test_fused_loss_at_the_huber_threshold_and_at_zero() -> None:
         assert one_pair.item() == pytest.approx(loss_value) and one_gradient.item() == pytest.approx(gradient)
 
 
+@pytest.mark.filterwarnings("error")  # searchsorted warns when it has to copy a strided tensor
+def test_strided_quantiles(dtype: th.dtype = th.float64) -> None:
+    generator = th.Generator().manual_seed(3)
+    current = th.randn(10, 7, generator=generator, dtype=dtype).t()  # (7, 10), not contiguous
+    target = th.randn(12, 7, generator=generator, dtype=dtype).t()
+    assert not current.is_contiguous() and not target.is_contiguous()
+    ours, ours_grad = loss_and_gradient(quantile_huber_loss, current, target)
+    theirs, theirs_grad = loss_and_gradient(sb3_contrib_loss, current, target)
+    assert th.allclose(ours, theirs, rtol=1e-7) and th.allclose(ours_grad, theirs_grad, rtol=1e-6, atol=1e-9)
+
+
 def test_other_shapes_and_options_are_sb3_contribs() -> None:
     generator = th.Generator().manual_seed(0)
     current, target = th.randn(4, 6, generator=generator), th.randn(4, 6, generator=generator)

@@ -37,8 +37,8 @@ class QuantileHuberLoss(th.autograd.Function):
     def forward(ctx: Any, current_quantiles: th.Tensor, target_quantiles: th.Tensor) -> th.Tensor:
         batch_size, n_quantiles = current_quantiles.shape
         n_targets = target_quantiles.shape[-1]
-        theta = current_quantiles.detach().double()
-        targets = target_quantiles.detach().double().sort(dim=-1).values
+        theta = current_quantiles.detach().double().contiguous()  # searchsorted copies (and warns) otherwise
+        targets = target_quantiles.detach().double().sort(dim=-1).values.contiguous()
         zeros = targets.new_zeros(batch_size, 1)
         sums = th.cat([zeros, targets.cumsum(dim=-1)], dim=-1)  # sums[:, k]: the k smallest targets' sum
         squares = th.cat([zeros, targets.square().cumsum(dim=-1)], dim=-1)
