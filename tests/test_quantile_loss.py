@@ -68,7 +68,8 @@ def test_strided_quantiles(dtype: th.dtype = th.float64) -> None:
     assert not current.is_contiguous() and not target.is_contiguous()
     ours, ours_grad = loss_and_gradient(quantile_huber_loss, current, target)
     theirs, theirs_grad = loss_and_gradient(sb3_contrib_loss, current, target)
-    assert th.allclose(ours, theirs, rtol=1e-7) and th.allclose(ours_grad, theirs_grad, rtol=1e-6, atol=1e-9)
+    assert th.allclose(ours, theirs, rtol=1e-7)
+    assert th.allclose(ours_grad, theirs_grad, rtol=1e-7, atol=1e-7 * theirs_grad.abs().max().item())
 
 
 def test_other_shapes_and_options_are_sb3_contribs() -> None:
