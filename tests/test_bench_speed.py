@@ -1,5 +1,6 @@
 """
-``scripts/bench_speed.py``: the two runs of a pair take turns, and each learns exactly what it would learn alone.
+``scripts/bench_speed.py``: the two runs of a pair take turns, and each learns exactly what it would learn alone;
+``scripts/bench_qrdqn_loss.py`` writes its tables.
 
 No speed is asserted here (that is the benchmark's job); only that taking turns does not change what is measured,
 and that each run's timers nest (its training time is part of its learn() time).
@@ -7,6 +8,8 @@ and that each run's timers nest (its training time is part of its learn() time).
 
 import hashlib
 import json
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -89,3 +92,20 @@ def test_tables_say_which_baseline_the_dqn_columns_are(name):
     said = "The DQN columns and rows are the baseline's: SB3's DQN with n_steps=10 (n-step DQN)." in table.splitlines()
     assert said == (result.get("baseline", "dqn") == "dqn_nstep")
     assert table.splitlines()[4 if said else 2].startswith("| pair | order | DQN steps/s |")
+
+
+def test_the_qrdqn_loss_benchmark_writes_its_table(tmp_path):
+    # A tiny run of scripts/bench_qrdqn_loss.py (no speed asserted): both classes timed, the loss alone too
+    output = tmp_path / "qrdqn.json"
+    tiny = ["--repeats", "2", "--timesteps", "200", "--prefill", "100", "--loss-rounds", "1", "--output", str(output)]
+    command = [sys.executable, str(SCRIPTS / "bench_qrdqn_loss.py"), *tiny]
+    finished = subprocess.run(command, capture_output=True, text=True, timeout=600)
+    assert finished.returncode == 0, finished.stderr[-3000:]
+    result = json.loads(output.read_text())
+    assert len(result["loss_ms"]["sb3-contrib"]) == len(result["loss_ms"]["sb3_offon"]) == 1
+    assert [pair["starts"] for pair in result["pairs"]] == ["sb3-contrib QRDQN", "sb3_offon QRDQN"]
+    for pair in result["pairs"]:
+        assert pair["sb3-contrib QRDQN"]["class"] == pair["sb3_offon QRDQN"]["class"] == "QRDQN"
+        assert pair["sb3-contrib QRDQN"]["env_steps"] == pair["sb3_offon QRDQN"]["env_steps"] == 200
+    assert len(result["wall"]["pair_ratios"]) == 2
+    assert "| **median** |" in output.with_suffix(".md").read_text()
