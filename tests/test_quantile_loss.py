@@ -1,4 +1,4 @@
-"""The fused quantile Huber loss and sb3_offon's QR-DQN against sb3-contrib's: same values, same gradients, same training."""
+"""The quantile Huber loss from sorted targets and sb3_offon's QR-DQN against sb3-contrib's: same values and training."""
 
 import copy
 
@@ -24,7 +24,7 @@ def loss_and_gradient(loss_fn, current: th.Tensor, target: th.Tensor, **kwargs) 
 @pytest.mark.parametrize("dtype", [th.float32, th.float64])
 @pytest.mark.parametrize("scale", [0.3, 2.0, 50.0])  # most pairs within the Huber threshold, some, nearly none
 @pytest.mark.parametrize("batch_size, n_quantiles, n_target_quantiles", [(32, 200, 200), (5, 7, 11), (1, 1, 3)])
-def test_fused_loss_is_sb3_contribs(
+def test_loss_is_sb3_contribs(
     dtype: th.dtype, scale: float, batch_size: int, n_quantiles: int, n_target_quantiles: int
 ) -> None:
     generator = th.Generator().manual_seed(batch_size * n_quantiles)
@@ -40,7 +40,7 @@ def test_fused_loss_is_sb3_contribs(
     assert theirs_grad.abs().sum() > 0  # a gradient to compare
 
 
-def test_fused_loss_at_the_huber_threshold_and_at_zero() -> None:
+def test_loss_at_the_huber_threshold_and_at_zero() -> None:
     # Integer quantiles: every difference is an integer, so many are exactly 0 and exactly +-1, where the Huber loss
     # switches branch and the asymmetric weight switches side
     current = th.tensor([[0.0, 1.0, 2.0, -1.0], [3.0, 3.0, -2.0, 0.0]], dtype=th.float64)

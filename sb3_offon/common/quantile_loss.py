@@ -80,13 +80,13 @@ def quantile_huber_loss(
     gradient, the midpoints as quantile fractions, summed over the quantiles. Any other case (TQC's critics, given
     fractions, a target with a gradient) is sb3-contrib's function.
 
-    :param current_quantiles: current estimate of quantiles, (batch_size, n_quantiles) for the fused pass
-    :param target_quantiles: target quantiles, (batch_size, n_target_quantiles) for the fused pass
+    :param current_quantiles: current estimate of quantiles, (batch_size, n_quantiles) for the sorted-target pass
+    :param target_quantiles: target quantiles, (batch_size, n_target_quantiles) for the sorted-target pass
     :param cum_prob: quantile fractions (None: the midpoints (i + 0.5) / n_quantiles)
     :param sum_over_quantiles: sum over the current quantiles (True, QR-DQN's) or average
     :return: the loss
     """
-    fused = (
+    sorted_targets = (
         cum_prob is None
         and sum_over_quantiles
         and current_quantiles.ndim == 2
@@ -94,7 +94,7 @@ def quantile_huber_loss(
         and current_quantiles.shape[0] == target_quantiles.shape[0]
         and not target_quantiles.requires_grad
     )
-    if fused:
+    if sorted_targets:
         return QuantileHuberLoss.apply(current_quantiles, target_quantiles)
     from sb3_contrib.common.utils import quantile_huber_loss as sb3_contrib_quantile_huber_loss
 

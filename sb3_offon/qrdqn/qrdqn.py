@@ -20,12 +20,12 @@ _sb3_contrib_loss = sb3_contrib_qrdqn.quantile_huber_loss
 
 
 @contextmanager
-def _fused_quantile_huber_loss() -> Iterator[None]:
+def _sorted_quantile_huber_loss() -> Iterator[None]:
     """
-    sb3-contrib's ``QRDQN.train`` calls the loss by its module's global name: point that name at the fused loss while
+    sb3-contrib's ``QRDQN.train`` calls the loss by its module's global name: point that name at this package's loss while
     one of these models trains, so that ``train`` itself stays sb3-contrib's (nothing copied). The first training to
     start swaps it and the last to end puts the original back, so models training in threads do not undo each other.
-    Any sb3-contrib QRDQN that trains meanwhile gets the fused loss too: the same values, sooner.
+    Any sb3-contrib QRDQN that trains meanwhile gets this loss too: the same values, sooner.
     """
     global _trainings_in_progress
     with _swap_lock:
@@ -54,5 +54,5 @@ class QRDQN(sb3_contrib.QRDQN):
     """
 
     def train(self, gradient_steps: int, batch_size: int = 100) -> None:
-        with _fused_quantile_huber_loss():
+        with _sorted_quantile_huber_loss():
             super().train(gradient_steps, batch_size)
