@@ -71,7 +71,6 @@ if __name__ == "__main__":
     print(f"loss forward + backward, 32 x 200 x 200: {loss_median} ms")
 
     hyperparams = dict(ZOO_HYPERPARAMS[MINATAR_BREAKOUT])
-    timing = {"prefill": args.prefill, "classes": CLASSES}
     pairs = []
     for repeat in range(args.repeats):
         order = ("DQN", "OffOnDQN") if repeat % 2 == 0 else ("OffOnDQN", "DQN")
