@@ -95,6 +95,7 @@ def test_tables_say_which_baseline_the_dqn_columns_are(name):
 
 
 def test_the_qrdqn_loss_benchmark_writes_its_table(tmp_path):
+    pytest.importorskip("minatar", reason="the 'minatar' extra is not installed")  # it times MinAtar/Breakout-v0
     # A tiny run of scripts/bench_qrdqn_loss.py (no speed asserted): both classes timed, the loss alone too
     output = tmp_path / "qrdqn.json"
     tiny = ["--repeats", "2", "--timesteps", "200", "--prefill", "100", "--loss-rounds", "1", "--output", str(output)]
