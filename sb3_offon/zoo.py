@@ -36,8 +36,7 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import EvalCallback
 
 # Registers CartPoleFallPenalty-v1 and MountainCarGoalBonus-v0 (also done by ``import sb3_offon``)
-import sb3_offon.envs
-import sb3_offon.optim  # (the MinAtar entries' optimizer, found through the package: see register())
+import sb3_offon.envs  # noqa: F401
 from sb3_offon.offon_dqn import OffOnDQN
 from sb3_offon.offon_dqn.offon_dqn import LOSS_FUNCTIONS, MC_MIXING_OPTIONS, MC_TRUNCATION_OPTIONS, SARSA_TARGET_OPTIONS
 from sb3_offon.qrdqn import QRDQN
@@ -390,7 +389,5 @@ def register() -> None:
     zoo_hyperparams_opt.HYPERPARAMS_CONVERTER.update({name: convert_offpolicy_params for name in ALGOS})
     zoo_train.ExperimentManager = OffOnExperimentManager  # type: ignore[misc]
     # The zoo evaluates a YAML file's `policy_kwargs` string in the namespace of its exp_manager module (which has
-    # `th` and `nn`): the MinAtar entries' "dict(features_extractor_class=MinAtarCNN, optimizer_class=sb3_offon.optim.RMSprop,
-    # ...)" finds the class and the package there
+    # `th` and `nn`): the MinAtar entries' "dict(features_extractor_class=MinAtarCNN, ...)" finds the class there
     zoo_exp_manager.MinAtarCNN = MinAtarCNN  # type: ignore[attr-defined]
-    zoo_exp_manager.sb3_offon = sb3_offon  # type: ignore[attr-defined]

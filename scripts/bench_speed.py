@@ -6,8 +6,7 @@ MinAtar/Breakout-v0) and the same seed. OffOnDQN's targets (``--mode``): ``defau
 lambda 0.9, Peng's Q(lambda)); ``paper``, the paper's coin flips (``PAPER_TARGETS``); ``lambda``, ``offon_lambda``'s
 (lambda 0.9, Watkins's cuts); ``double_q``, the defaults with double Q-learning. The baseline (``--baseline``, the "DQN"
 columns): SB3's DQN, SB3's DQN with ``n_steps=10`` (``dqn_nstep``), or OffOnDQN with its defaults (``offon_defaults``,
-to measure what an option of OffOnDQN costs); ``--baseline-optimizer torch`` gives the baseline torch's optimizer where the
-settings name sb3_offon.optim's (MinAtar's centred RMSprop), to measure what the latter saves.
+to measure what an option of OffOnDQN costs).
 
 The two runs of a pair take turns in one process: each learn() runs in a thread of its own, and they hand a baton
 to each other every ``--switch-every`` env steps (from a callback), so only one of them computes at any time. A
@@ -28,7 +27,6 @@ Usage:
     python scripts/bench_speed.py --env LunarLander-v3 --mode lambda --baseline dqn_nstep --repeats 5
     python scripts/bench_speed.py --env MinAtar/Breakout-v0 --mode defaults --train-freq 1 --timesteps 15000 --prefill 5000
     python scripts/bench_speed.py --env LunarLander-v3 --mode double_q --baseline offon_defaults
-    python scripts/bench_speed.py --env MinAtar/Breakout-v0 --baseline offon_defaults --baseline-optimizer torch --prefill 5000
 
 ``--env AtariShaped`` is an Atari-shaped task made up on the spot (4 stacked 84x84 uint8 frames, episodes of 200 steps
 that end by termination, CnnPolicy, the zoo's Atari DQN settings with a smaller buffer), so that CNNs can be measured,
@@ -59,7 +57,6 @@ from stable_baselines3.common.envs import FakeImageEnv
 import sb3_offon
 from sb3_offon import PAPER_TARGETS, MinAtarCNN, OffOnDQN
 from sb3_offon.offon_dqn.offon_dqn import OFFON_PARAMETERS
-from sb3_offon.optim import RMSprop
 
 # rl-baselines3-zoo's tuned DQN hyperparameters (hyperparams/dqn.yml), minus n_timesteps and the policy name
 ZOO_HYPERPARAMS = {
@@ -121,7 +118,7 @@ ZOO_HYPERPARAMS[MINATAR_BREAKOUT] = dict(
     policy_kwargs=dict(
         features_extractor_class=MinAtarCNN,
         net_arch=[],
-        optimizer_class=RMSprop,
+        optimizer_class=th.optim.RMSprop,
         optimizer_kwargs=dict(alpha=0.95, eps=0.01, centered=True),
     ),
 )
@@ -213,13 +210,6 @@ def parse_args() -> argparse.Namespace:
         help="SB3's DQN, its n-step DQN (n = 10), or OffOnDQN with its defaults (default: dqn)",
     )
     parser.add_argument(
-        "--baseline-optimizer",
-        choices=["settings", "torch"],
-        default="settings",
-        help="the baseline's optimizer: the settings' (default), or torch's class of the same name in place of "
-        "sb3_offon.optim's (what the latter saves)",
-    )
-    parser.add_argument(
         "--train-freq", type=int, default=None, help="env steps between gradient steps, for both runs (default: the settings')"
     )
     parser.add_argument("--output", type=str, default=None, help="optional JSON path (a markdown table is written next to it)")
@@ -291,16 +281,6 @@ class TakeTurns(BaseCallback):
             self.release()
             self.take()
         return True
-
-
-def with_torch_optimizer(hyperparams: dict) -> dict:
-    """The settings' ``policy_kwargs`` with torch's optimizer class in place of sb3_offon.optim's of the same name."""
-    policy_kwargs = dict(hyperparams.get("policy_kwargs", {}))
-    optimizer_class = policy_kwargs.get("optimizer_class")
-    if optimizer_class is None or optimizer_class.__module__ != "sb3_offon.optim":
-        raise SystemExit("--baseline-optimizer torch: these settings use no optimizer of sb3_offon.optim")
-    policy_kwargs["optimizer_class"] = getattr(th.optim, optimizer_class.__name__)
-    return policy_kwargs
 
 
 def build(
@@ -434,11 +414,6 @@ def markdown_table(result: dict) -> str:
             if result.get("baseline", "dqn") != "dqn"
             else []
         ),
-        *(
-            ["The baseline's optimizer is torch's class, the other run's sb3_offon.optim's (the settings').", ""]
-            if result.get("baseline_optimizer", "settings") == "torch"
-            else []
-        ),
         "| pair | order | DQN steps/s | OffOnDQN steps/s | ratio | DQN CPU steps/s | OffOnDQN CPU steps/s | CPU ratio |",
         "|---:|---|---:|---:|---:|---:|---:|---:|",
     ]
@@ -487,8 +462,6 @@ if __name__ == "__main__":
         hyperparams["train_freq"] = args.train_freq
     # The baseline's and OffOnDQN's own arguments (the "DQN" columns are the baseline's, n-step DQN's with dqn_nstep)
     baseline_class, baseline_kwargs = BASELINES[args.baseline]
-    if args.baseline_optimizer == "torch":
-        baseline_kwargs = {**baseline_kwargs, "policy_kwargs": with_torch_optimizer(hyperparams)}
     classes = {"DQN": baseline_class}
     extra_kwargs = {"DQN": baseline_kwargs, "OffOnDQN": MODES[args.mode]}
     make_env(args.env).close()  # fail early if the env (Box2D for LunarLander) is missing
@@ -510,7 +483,6 @@ if __name__ == "__main__":
         "baseline": args.baseline,
         "baseline_class": baseline_class.__name__,
         "baseline_kwargs": baseline_kwargs,
-        "baseline_optimizer": args.baseline_optimizer,
         "mode": args.mode,
         "prefill": args.prefill,
         "cpu_count": os.cpu_count(),

@@ -13,7 +13,6 @@ import sys
 
 import numpy as np
 import pytest
-import torch as th
 from helpers import SCRIPTS, load_script
 from stable_baselines3 import DQN
 
@@ -70,20 +69,6 @@ def test_runs_taking_turns_learn_what_they_learn_alone(monkeypatch, extra_kwargs
         # Each run is timed only while it holds the baton: both times are parts of the pair's elapsed time
         assert 0 < run["train_seconds"] < run["learn_seconds"]
         assert np.isfinite(run["steps_per_second"])
-
-
-def test_baseline_optimizer_torch_swaps_only_the_optimizer_class():
-    bench_speed = load_script("bench_speed")
-    settings = bench_speed.ZOO_HYPERPARAMS[bench_speed.MINATAR_BREAKOUT]
-    assert settings["policy_kwargs"]["optimizer_class"] is bench_speed.RMSprop  # sb3_offon.optim's, as the YAML has it
-    swapped = bench_speed.with_torch_optimizer(settings)
-    assert swapped["optimizer_class"] is th.optim.RMSprop
-    assert {k: v for k, v in swapped.items() if k != "optimizer_class"} == {
-        k: v for k, v in settings["policy_kwargs"].items() if k != "optimizer_class"
-    }
-    assert settings["policy_kwargs"]["optimizer_class"] is bench_speed.RMSprop  # the settings themselves unchanged
-    with pytest.raises(SystemExit, match=r"no optimizer of sb3_offon\.optim"):
-        bench_speed.with_torch_optimizer(bench_speed.ZOO_HYPERPARAMS["CartPole-v1"])
 
 
 def test_baton_alternates_and_lets_the_survivor_run_on():
