@@ -9,9 +9,13 @@ env objects; rl-baselines3-zoo builds them from a YAML entry's ``callback:`` key
           threshold: 490
           window: 100
       - sb3_offon.callbacks.GoalCountCallback
+
+Both keep their running state (``get_state``/``set_state``) in the checkpoints of :mod:`sb3_offon.resume`, so that a
+resumed run stops and counts as the uninterrupted one would.
 """
 
 from collections import deque
+from typing import Any
 
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
@@ -51,6 +55,15 @@ class StopOnMeanTrainingReward(BaseCallback):
         self.n_episodes = 0
         # The number of timesteps at which training was stopped, None while it runs on
         self.stopped_at: int | None = None
+
+    def get_state(self) -> dict[str, Any]:
+        """The window of recent episodes, which a run checkpoint keeps so that a resumed run stops where it would have."""
+        return {"recent": list(self.recent), "n_episodes": self.n_episodes}
+
+    def set_state(self, state: dict[str, Any]) -> None:
+        """Go on from :meth:`get_state`'s window."""
+        self.recent = deque((float(value) for value in state["recent"]), maxlen=self.window)
+        self.n_episodes = int(state["n_episodes"])
 
     def _on_step(self) -> bool:
         finished = False
@@ -95,6 +108,14 @@ class GoalCountCallback(BaseCallback):
         self.info_key = info_key
         self.log_key = log_key
         self.goal_count = 0
+
+    def get_state(self) -> dict[str, Any]:
+        """The count so far, which a run checkpoint keeps so that a resumed run counts on from it."""
+        return {"goal_count": self.goal_count}
+
+    def set_state(self, state: dict[str, Any]) -> None:
+        """Go on from :meth:`get_state`'s count."""
+        self.goal_count = int(state["goal_count"])
 
     def _on_step(self) -> bool:
         for info in self.locals["infos"]:

@@ -4,10 +4,10 @@ Checkpoints from which an interrupted training run goes on where it stopped.
 SB3 saves a model and its replay buffer, and ``learn(..., reset_num_timesteps=False)`` continues its step count, but
 what a *run* is also lives outside the model: the evaluations so far (SB3's ``EvalCallback`` keeps them in memory and
 rewrites ``evaluations.npz`` from them), the training episodes in the ``Monitor`` files, the evaluation schedule (the
-callback's own call count), and the budget the schedules were made for. rl-baselines3-zoo's ``-i`` (continue training)
-starts a new run from a model: the step count, ε and the evaluation steps start again from 0. A checkpoint here holds
-all of it, so that a resumed run has the evaluation steps, ε schedule, learning start, target updates and budget of an
-uninterrupted one.
+callback's own call count), the running state of other callbacks (a stop rule's window of recent episodes), and the
+budget the schedules were made for. rl-baselines3-zoo's ``-i`` (continue training) starts a new run from a model: the
+step count, ε and the evaluation steps start again from 0. A checkpoint here holds all of it, so that a resumed run has
+the evaluation steps, ε schedule, learning start, target updates, stop rule and budget of an uninterrupted one.
 
 What differs from an uninterrupted run, by design:
 
@@ -30,6 +30,7 @@ so a run killed while writing one resumes from the one before.
 import json
 import os
 import shutil
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -38,7 +39,7 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.buffers import ReplayBuffer
-from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList, EvalCallback
 
 LATEST = "latest"
 STATE_FILE = "checkpoint.json"
@@ -47,6 +48,8 @@ MODEL_FILE = "model.zip"
 REPLAY_BUFFER_FILE = "replay_buffer.pkl"
 EVALUATIONS_FILE = "evaluations.npz"
 MONITOR_SUFFIX = "monitor.csv"
+# Written into a run's log folder by the command line when a callback of its own ended it before its budget on purpose
+STOPPED_FILE = "stopped.json"
 
 
 def resumed_seed(seed: int | None, num_timesteps: int) -> int:
@@ -86,6 +89,35 @@ def joined_monitor(earlier: str | None, current: str) -> str:
     return "\n".join([*earlier_lines, *rows]) + "\n"
 
 
+def synced(folder: Path) -> None:
+    """Flush every file under ``folder``, and the folder entries, to the disk (``fsync``)."""
+    for path in sorted(folder.rglob("*"), reverse=True):  # files before the folders that list them
+        descriptor = os.open(path, os.O_RDONLY)
+        try:
+            os.fsync(descriptor)
+        finally:
+            os.close(descriptor)
+    descriptor = os.open(folder, os.O_RDONLY)
+    try:
+        os.fsync(descriptor)
+    finally:
+        os.close(descriptor)
+
+
+def stateful_callbacks(callbacks: Sequence[BaseCallback]) -> list[BaseCallback]:
+    """
+    The callbacks among ``callbacks`` (and inside any ``CallbackList``) whose running state a checkpoint keeps: those
+    with ``get_state()`` (a JSON-serialisable dict) and ``set_state(state)``, as :mod:`sb3_offon.callbacks`' have.
+    """
+    found: list[BaseCallback] = []
+    for callback in callbacks:
+        if isinstance(callback, CallbackList):
+            found.extend(stateful_callbacks(callback.callbacks))
+        elif callable(getattr(callback, "get_state", None)) and callable(getattr(callback, "set_state", None)):
+            found.append(callback)
+    return found
+
+
 def cut_running_episodes(replay_buffer: ReplayBuffer) -> None:
     """
     Mark each env's last stored transition, unless it ended its episode, as a time-limit truncation (done and
@@ -117,6 +149,9 @@ class Checkpoint:
     :param best_mean_reward: the evaluation callback's best mean return so far
     :param last_mean_reward: its latest mean return
     :param saved: when it was written (UTC, ISO 8601)
+    :param replay_buffer: whether the checkpoint holds the model's replay buffer (None: not recorded, older checkpoints)
+    :param callback_states: the running state of the run's callbacks that have one (:func:`stateful_callbacks`), as
+        ``[class name, state]`` in the callbacks' order
     :param monitor_texts: the run's monitor files up to this checkpoint, by file name (read with the checkpoint: a
         resumed run writing its own checkpoints into the same folder removes this one)
     """
@@ -129,6 +164,8 @@ class Checkpoint:
     best_mean_reward: float = -np.inf
     last_mean_reward: float = -np.inf
     saved: str = ""
+    replay_buffer: bool | None = None
+    callback_states: list[list[Any]] = field(default_factory=list)
     monitor_texts: dict[str, str] = field(default_factory=dict)
 
     @classmethod
@@ -143,6 +180,17 @@ class Checkpoint:
             return None
         checkpoint_folder = Path(folder) / pointer.read_text().strip()
         state = json.loads((checkpoint_folder / STATE_FILE).read_text())
+        expected = [MODEL_FILE, *([REPLAY_BUFFER_FILE] if state.get("replay_buffer") else [])]
+        damaged = [
+            name
+            for name in expected
+            if not (checkpoint_folder / name).is_file() or (checkpoint_folder / name).stat().st_size == 0
+        ]
+        if damaged:
+            # Written in full and synced before `latest` named it: only a damaged disk or a hand edit gets here
+            raise ValueError(
+                f"The checkpoint in {checkpoint_folder} lacks {', '.join(damaged)}: remove the folder to start afresh"
+            )
         monitors = {path.name: path.read_text() for path in sorted(checkpoint_folder.glob(f"*{MONITOR_SUFFIX}"))}
         return cls(folder=checkpoint_folder, monitor_texts=monitors, **state)
 
@@ -170,15 +218,48 @@ class Checkpoint:
         callback.last_mean_reward = self.last_mean_reward
         # EvalCallback evaluates when its call count (one call per vectorised step) is a multiple of eval_freq
         callback.n_calls = self.num_timesteps // n_envs
+        if callback.log_path is not None and callback.evaluations_timesteps:
+            # EvalCallback writes its file only when it evaluates: a run resumed after its last evaluation (a budget
+            # that is not a multiple of eval_freq) would otherwise end with no file, its evaluations only in here
+            os.makedirs(os.path.dirname(callback.log_path) or ".", exist_ok=True)
+            successes = {"successes": callback.evaluations_successes} if callback.evaluations_successes else {}
+            np.savez(
+                callback.log_path,
+                timesteps=callback.evaluations_timesteps,
+                results=callback.evaluations_results,
+                ep_lengths=callback.evaluations_length,
+                **successes,
+            )
 
-    def prepare(self, model: BaseAlgorithm, eval_callback: EvalCallback | None = None) -> None:
+    def restore_callbacks(self, callbacks: Sequence[BaseCallback]) -> None:
+        """
+        Give the resumed run's callbacks that have a running state (:func:`stateful_callbacks`) the state they had at
+        this checkpoint: a stop rule's window of recent episodes, a running count.
+
+        :param callbacks: the resumed run's callbacks, as the interrupted run had them
+        """
+        current = stateful_callbacks(callbacks)
+        names = [type(callback).__name__ for callback in current]
+        if names != [name for name, _ in self.callback_states]:
+            raise ValueError(
+                f"The checkpoint in {self.folder} holds the state of the callbacks {[n for n, _ in self.callback_states]}, "
+                f"the resumed run has {names}: resume a run with the callbacks it was started with"
+            )
+        for callback, (_, state) in zip(current, self.callback_states, strict=True):
+            callback.set_state(state)  # type: ignore[attr-defined]
+
+    def prepare(
+        self, model: BaseAlgorithm, eval_callback: EvalCallback | None = None, callbacks: Sequence[BaseCallback] = ()
+    ) -> None:
         """
         Make a model loaded from this checkpoint (with its replay buffer) go on as the interrupted run: the last stored
         transitions cut as truncations (:func:`cut_running_episodes`), the random generators seeded for the resumed part
-        (:func:`resumed_seed`), and the evaluation callback holding the evaluations so far.
+        (:func:`resumed_seed`), the evaluation callback holding the evaluations so far, and the other callbacks their
+        running state (:meth:`restore_callbacks`).
 
         :param model: the model, loaded with its replay buffer
         :param eval_callback: the resumed run's evaluation callback (None: none)
+        :param callbacks: the resumed run's callbacks (those with a running state get it back)
         """
         if getattr(model, "replay_buffer", None) is not None:
             cut_running_episodes(model.replay_buffer)  # type: ignore[attr-defined]
@@ -187,9 +268,15 @@ class Checkpoint:
         if eval_callback is not None:
             self.restore_evaluations(eval_callback, model.n_envs)
             eval_callback.eval_env.seed(seed + 1)
+        self.restore_callbacks(callbacks)
 
     def load_model(
-        self, algo_class: type[BaseAlgorithm], env: Any, eval_callback: EvalCallback | None = None, **kwargs: Any
+        self,
+        algo_class: type[BaseAlgorithm],
+        env: Any,
+        eval_callback: EvalCallback | None = None,
+        callbacks: Sequence[BaseCallback] = (),
+        **kwargs: Any,
     ) -> BaseAlgorithm:
         """
         The interrupted run's model, ready to go on (the Python way; the command line's is ``--resume``)::
@@ -206,6 +293,7 @@ class Checkpoint:
         :param env: the training env, made as the interrupted run's was (and, if that run normalised it, wrapped in
             ``VecNormalize.load`` of the checkpoint's ``vecnormalize.pkl``)
         :param eval_callback: the resumed run's evaluation callback (None: none)
+        :param callbacks: the resumed run's other callbacks (those with a running state get it back)
         :param kwargs: more arguments of ``algo_class.load`` (``device``, ``custom_objects``, ...)
         :return: the model, its replay buffer loaded
         """
@@ -214,7 +302,7 @@ class Checkpoint:
         if buffer.is_file():
             # truncate_last_traj: OffOnDQN's buffers close their running episodes' returns as truncations
             model.load_replay_buffer(buffer, truncate_last_traj=True)  # type: ignore[attr-defined]
-        self.prepare(model, eval_callback)
+        self.prepare(model, eval_callback, callbacks)
         return model
 
 
@@ -235,6 +323,8 @@ class RunCheckpoint(BaseCallback):
     :param resumed_from: the checkpoint this run was resumed from (its monitor files are the start of this run's)
     :param vec_normalize_path: where in a checkpoint the ``VecNormalize`` statistics go, if the env has them
         (rl-baselines3-zoo loads them from ``<env name>/vecnormalize.pkl`` next to the model it continues)
+    :param callbacks: the run's other callbacks: the running state of those that have one (:func:`stateful_callbacks`)
+        is kept in each checkpoint
     :param verbose: 1: a line per checkpoint written
     """
 
@@ -246,6 +336,7 @@ class RunCheckpoint(BaseCallback):
         monitor_dir: str | Path | None = None,
         resumed_from: Checkpoint | None = None,
         vec_normalize_path: str = "vecnormalize.pkl",
+        callbacks: Sequence[BaseCallback] = (),
         verbose: int = 0,
     ) -> None:
         super().__init__(verbose)
@@ -257,6 +348,7 @@ class RunCheckpoint(BaseCallback):
         self.monitor_dir = Path(monitor_dir) if monitor_dir is not None else None
         self.resumed_from = resumed_from
         self.vec_normalize_path = vec_normalize_path
+        self.stateful = stateful_callbacks(callbacks)
         self._next_step = 0
 
     def _on_training_start(self) -> None:
@@ -303,6 +395,8 @@ class RunCheckpoint(BaseCallback):
             "seed": model.seed,
             "resumed_at": [*self.resumed_from.resumed_at, self.resumed_from.num_timesteps] if self.resumed_from else [],
             "saved": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+            "replay_buffer": (target / REPLAY_BUFFER_FILE).is_file(),
+            "callback_states": [[type(callback).__name__, callback.get_state()] for callback in self.stateful],  # type: ignore[attr-defined]
         }
         if self.eval_callback is not None:
             callback = self.eval_callback
@@ -317,6 +411,8 @@ class RunCheckpoint(BaseCallback):
                 np.savez(target / EVALUATIONS_FILE, **arrays)
             state.update(best_mean_reward=float(callback.best_mean_reward), last_mean_reward=float(callback.last_mean_reward))
         (target / STATE_FILE).write_text(json.dumps(state, indent=2))
+        # On disk before `latest` names it, so that a power cut cannot leave `latest` naming a checkpoint with empty files
+        synced(target)
         pointer = self.folder / f"{LATEST}.tmp"
         pointer.write_text(target.name)
         os.replace(pointer, self.folder / LATEST)

@@ -18,6 +18,7 @@ Its experiment manager (:class:`OffOnExperimentManager`) also writes checkpoints
 """
 
 import inspect
+import json
 import shutil
 from pathlib import Path
 from typing import Any
@@ -40,7 +41,7 @@ import sb3_offon.envs  # noqa: F401
 from sb3_offon.offon_dqn import OffOnDQN
 from sb3_offon.offon_dqn.offon_dqn import LOSS_FUNCTIONS, MC_MIXING_OPTIONS, MC_TRUNCATION_OPTIONS, SARSA_TARGET_OPTIONS
 from sb3_offon.qrdqn import QRDQN
-from sb3_offon.resume import Checkpoint, RunCheckpoint, joined_monitor
+from sb3_offon.resume import STOPPED_FILE, Checkpoint, RunCheckpoint, joined_monitor
 from sb3_offon.torch_layers import MinAtarCNN
 from sb3_offon.variants import DQNMC, DQNSarsa
 
@@ -172,7 +173,7 @@ class OffOnExperimentManager(ExperimentManager):
                 f"--resume {self.resume_dir}: the run was checkpointed with a budget of {checkpoint.total_timesteps} "
                 f"steps, this command trains {self.n_timesteps} (-n): a resumed run keeps its budget"
             )
-        checkpoint.prepare(model, self._eval_callback())
+        checkpoint.prepare(model, self._eval_callback(), self.callbacks)
         return model, saved_hyperparams
 
     def _eval_callback(self) -> EvalCallback | None:
@@ -192,6 +193,7 @@ class OffOnExperimentManager(ExperimentManager):
                     resumed_from=self.resumed_from,
                     # Where the zoo's continue-training path looks for them (ExperimentManager._maybe_normalize)
                     vec_normalize_path=f"{self.env_name}/vecnormalize.pkl",
+                    callbacks=list(self.callbacks),
                     verbose=self.verbose,
                 )
             )
@@ -223,7 +225,10 @@ class OffOnExperimentManager(ExperimentManager):
         """
         The zoo's training; a resumed run trains the steps its budget has left, its step count going on
         (``reset_num_timesteps=False``), and its monitor files are joined to the checkpoint's. A run that reaches its
-        budget removes its checkpoints: they are for runs that did not.
+        budget removes its checkpoints: they are for runs that did not. So does a run that a callback of its own ended
+        on purpose (one whose ``stopped_at`` is set, :class:`sb3_offon.callbacks.StopOnMeanTrainingReward`): it is
+        finished, and says so in ``stopped.json`` in its log folder (the step and the callback), which tells it from a
+        run cut short by Ctrl-C.
         """
         if self.resumed_from is None:
             super().learn(model)
@@ -232,7 +237,11 @@ class OffOnExperimentManager(ExperimentManager):
             for name, text in self.resumed_from.monitor_texts.items():
                 current = Path(self.save_path) / name
                 current.write_text(joined_monitor(text, current.read_text() if current.is_file() else ""))
-        if self.checkpoint_freq > 0 and model.num_timesteps >= self.n_timesteps:
+        stopped_by = [callback for callback in self.callbacks if getattr(callback, "stopped_at", None) is not None]
+        if stopped_by:
+            record = {"num_timesteps": int(model.num_timesteps), "callback": type(stopped_by[0]).__name__}
+            (Path(self.save_path) / STOPPED_FILE).write_text(json.dumps(record, indent=2) + "\n")
+        if self.checkpoint_freq > 0 and (model.num_timesteps >= self.n_timesteps or stopped_by):
             shutil.rmtree(self.checkpoint_dir, ignore_errors=True)
 
 

@@ -79,9 +79,12 @@ from tqdm import tqdm
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from run_records import (
     IDENTITY,
+    STOPPED_FILE,
     checkpoint_dir,
+    claim,
     env_folder,
     read_evaluations,
+    release,
     resume_point,
     run_dir,
     run_status,
@@ -99,7 +102,7 @@ DEFAULT_ENVS = {
 }
 # Files of the zoo's run folder worth keeping (small); model zips and replay buffers are not
 KEEP_SUFFIXES = {".csv", ".npz", ".yml", ".yaml", ".txt", ".json"}
-KEEP_NAMES = {"vecnormalize.pkl"}
+KEEP_NAMES = {"vecnormalize.pkl", STOPPED_FILE}
 LOG_TAIL_LINES = 60
 
 
@@ -397,7 +400,7 @@ def run_one(spec: dict) -> dict:
     lines = (scratch / "train.log").read_text(errors="replace").splitlines()
     files["train.log"] = ("\n".join(lines[-LOG_TAIL_LINES:]) + "\n").encode()
     # A run cut short keeps its checkpoints for the next attempt, even where it exited with 0 (the zoo does on Ctrl-C)
-    whole_way = zoo_runs and stopped_at(read_evaluations(zoo_runs[-1]), spec) is None
+    whole_way = zoo_runs and stopped_at(read_evaluations(zoo_runs[-1]), spec, (zoo_runs[-1] / STOPPED_FILE).is_file()) is None
     shutil.rmtree(scratch, ignore_errors=True)
     if returncode == 0 and whole_way and spec.get("checkpoint_dir"):
         shutil.rmtree(spec["checkpoint_dir"], ignore_errors=True)
@@ -465,24 +468,62 @@ def run_order(specs: list[dict]) -> list[dict]:
 
 
 # ----------------------------------------------------------------------------------------------------------------------
-# Executors: both yield the results of run_one as the runs finish
+# Executors: both yield the results of run_one as the runs finish, and {"spec": ..., "skipped": True} for a run that
+# another runner holds (or has finished meanwhile). Each run is claimed (run_records.claim) before it starts and given
+# back when the caller asks for the next result, after it has stored this one.
 # ----------------------------------------------------------------------------------------------------------------------
-def run_local(specs: list[dict], workers: int) -> Iterator[dict]:
+def take(root: Path, spec: dict) -> int | None:
+    """Claim the run of ``spec`` and empty its folder (an unfinished one is redone, from its checkpoint if any)."""
+    descriptor = claim(root, spec)
+    if descriptor is not None:
+        shutil.rmtree(run_dir(root, spec), ignore_errors=True)
+    return descriptor
+
+
+def run_local(specs: list[dict], workers: int, root: Path) -> Iterator[dict]:
     """A pool of threads, each waiting on one training subprocess: the work itself is in the subprocesses."""
+    waiting, running = iter(specs), {}
     with concurrent.futures.ThreadPoolExecutor(max_workers=workers) as pool:
-        futures = [pool.submit(run_one, spec) for spec in specs]
+
+        def start_next() -> Iterator[dict]:
+            for spec in waiting:
+                descriptor = take(root, spec)
+                if descriptor is None:
+                    yield {"spec": spec, "skipped": True}
+                    continue
+                running[pool.submit(run_one, spec)] = descriptor
+                return
+
         try:
-            for future in concurrent.futures.as_completed(futures):
-                yield future.result()
+            for _ in range(workers):
+                yield from start_next()
+            while running:
+                finished, _ = concurrent.futures.wait(running, return_when=concurrent.futures.FIRST_COMPLETED)
+                for future in finished:
+                    descriptor = running.pop(future)
+                    try:
+                        yield future.result()
+                    finally:
+                        release(descriptor)
+                    yield from start_next()
         finally:
-            for future in futures:
+            for future in running:
                 future.cancel()
 
 
-def run_ray(specs: list[dict], workers: int, address: str | None) -> Iterator[dict]:
+def run_ray(specs: list[dict], workers: int, address: str | None, root: Path) -> Iterator[dict]:
     """The same task function as a Ray task (1 CPU each), on a local Ray instance or on the cluster at ``address``."""
     import ray
 
+    # Ray schedules every run at once: they are claimed up front (locks in this process; its tasks write nothing here)
+    held: dict[int, int] = {}
+    for spec in specs:
+        descriptor = take(root, spec)
+        if descriptor is None:
+            yield {"spec": spec, "skipped": True}
+        else:
+            held[id(spec)] = descriptor
+    specs = [spec for spec in specs if id(spec) in held]
     if address is None:
         ray.init(num_cpus=workers, include_dashboard=False)
     else:
@@ -498,14 +539,20 @@ def run_ray(specs: list[dict], workers: int, address: str | None) -> Iterator[di
             ready, _ = ray.wait(list(pending), num_returns=1)
             spec = pending.pop(ready[0])
             try:
-                yield ray.get(ready[0])
+                result = ray.get(ready[0])
             except ray.exceptions.RayError as error:  # a lost worker or node: a failed run, redone next time
                 message = f"[benchmark] Ray task failed: {error}\n".encode()
-                yield {"spec": spec, "returncode": None, "wall_time_s": 0.0, "files": {"train.log": message}}
+                result = {"spec": spec, "returncode": None, "wall_time_s": 0.0, "files": {"train.log": message}}
+            try:
+                yield result
+            finally:
+                release(held.pop(id(spec)))
     finally:
         for ref in pending:
             ray.cancel(ref, force=True)
         ray.shutdown()
+        for descriptor in held.values():
+            release(descriptor)
 
 
 # ----------------------------------------------------------------------------------------------------------------------
@@ -542,16 +589,22 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     if not todo:
         return 0
-    # Unfinished folders (crashes, interrupted grids, deleted files) are redone, from their checkpoint if they have one
-    for spec in todo:
-        shutil.rmtree(run_dir(args.root, spec), ignore_errors=True)
-    results = run_ray(todo, args.workers, args.ray_address) if args.ray else run_local(todo, args.workers)
+    if args.ray:
+        results = run_ray(todo, args.workers, args.ray_address, args.root)
+    else:
+        results = run_local(todo, args.workers, args.root)
     # The bar counts env steps (budgets), so that its ETA weighs long runs as such; the postfix counts runs
     bar = tqdm(total=sum(spec["n_timesteps"] for spec in todo), unit="step", unit_scale=True, dynamic_ncols=True)
     bar.set_postfix_str(f"0/{len(todo)} runs")
     wall_times, failures = [], 0
     with bar:
         for n_done, result in enumerate(results, start=1):
+            if result.get("skipped"):
+                spec = result["spec"]
+                bar.write(f"{spec['algo']} {spec['env']} seed {spec['seed']}: taken by another runner, left to it")
+                bar.update(spec["n_timesteps"])
+                bar.set_postfix_str(f"{n_done}/{len(todo)} runs" + (f", {failures} failed" if failures else ""))
+                continue
             ok, message = store(result, run_dir(args.root, result["spec"]), code_version())
             failures += not ok
             if ok:

@@ -172,6 +172,9 @@ def final_not_below(
         difference = final_difference(study, scores, env, algo, reference)
         if difference is None or not complete_pair(study, runs, env, algo, reference):
             return None, f"{text}: runs missing on {env}"
+        if np.isnan(difference[2]):
+            # A side with a single run has no interval: the criterion cannot be judged, not passed by a NaN comparison
+            return None, f"{text}: no interval on {env} (a side has a single run)"
         cells.append(f"{env} {interval(difference, '+.3g')}")
         low, high = study.ranges.get(env, (0.0, 0.0))
         if difference[2] < -margin * (high - low):

@@ -4,7 +4,9 @@ finished, where an unfinished one resumes, and how a run's files and its record 
 written.
 """
 
+import fcntl
 import json
+import os
 import shutil
 from pathlib import Path
 
@@ -13,6 +15,9 @@ import numpy as np
 # The runs' own settings that define a result: a finished run made with other values is not the requested run
 IDENTITY = ("n_timesteps", "eval_freq", "eval_episodes", "hyperparams")
 DONE, FAILED = "done.json", "failed.json"
+# What the command line writes into a run's log folder when the run's own stop rule ended it (sb3_offon.resume's
+# STOPPED_FILE; named here so that the runner reads records without importing torch)
+STOPPED_FILE = "stopped.json"
 
 
 def env_folder(env: str) -> str:
@@ -29,6 +34,36 @@ def run_dir(root: Path, spec: dict) -> Path:
 def checkpoint_dir(root: Path, spec: dict) -> Path:
     """Where a run's checkpoints go: ``<root>/.checkpoints/<grid>/<algo>/<env>_<seed>`` (a hidden folder git ignores)."""
     return root / ".checkpoints" / run_dir(root, spec).relative_to(root)
+
+
+def claim(root: Path, spec: dict) -> int | None:
+    """
+    Take the run of ``spec`` for this process: an exclusive lock (``flock``) on ``<its checkpoint folder>.lock``, held
+    until :func:`release`, so that two runners started on overlapping grids (or a grid started twice) never train,
+    resume or store the same run at once. Runners on one machine, or on a file system with working ``flock``, see
+    each other's locks.
+
+    :return: the lock's file descriptor, or None when another process holds the run, or has finished it since this
+        runner listed its runs (the lock is then not kept)
+    """
+    path = checkpoint_dir(root, spec).with_name(f"{checkpoint_dir(root, spec).name}.lock")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    descriptor = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(descriptor)
+        return None
+    if run_status(run_dir(root, spec), spec) == "finished":
+        release(descriptor)
+        return None
+    return descriptor
+
+
+def release(descriptor: int) -> None:
+    """Give back a run taken with :func:`claim`."""
+    fcntl.flock(descriptor, fcntl.LOCK_UN)
+    os.close(descriptor)
 
 
 def checkpoint_settings(spec: dict) -> dict:
@@ -70,13 +105,17 @@ def read_evaluations(folder: Path) -> dict[str, np.ndarray] | None:
         return None
 
 
-def stopped_at(evaluations: dict[str, np.ndarray] | None, spec: dict) -> int | None:
+def stopped_at(evaluations: dict[str, np.ndarray] | None, spec: dict, ended_by_its_rule: bool = False) -> int | None:
     """
-    The step of the last evaluation of a run that stopped before its budget, None for a run that went the whole way.
+    The step of the last evaluation of a run cut short before its budget, None for a run that went the whole way or
+    that its own stop rule ended (``ended_by_its_rule``: its log folder has ``stopped.json``).
 
     A run that reached ``n_timesteps`` has evaluated within its last ``eval_freq`` steps; one whose last evaluation is
-    older was cut short, whatever its return code (the zoo saves and exits with 0 on Ctrl-C).
+    older was cut short, whatever its return code (the zoo saves and exits with 0 on Ctrl-C), unless a callback of its
+    settings ended it on purpose (the paper's CartPole stop rule), which the command line records in ``stopped.json``.
     """
+    if ended_by_its_rule:
+        return None
     if evaluations is None or len(evaluations.get("timesteps", [])) == 0:
         return 0
     last = int(evaluations["timesteps"][-1])
@@ -122,7 +161,7 @@ def store(result: dict, folder: Path, code_version: dict[str, str]) -> tuple[boo
         (partial / name).write_bytes(data)
     evaluations = read_evaluations(partial) if "evaluations.npz" in files else None
     n_evaluations = 0 if evaluations is None else len(evaluations["timesteps"])
-    stopped = stopped_at(evaluations, spec) if n_evaluations else None
+    stopped = stopped_at(evaluations, spec, STOPPED_FILE in files) if n_evaluations else None
     monitored = any(name.endswith("monitor.csv") for name in files)
     ok = result["returncode"] == 0 and n_evaluations > 0 and stopped is None and monitored
     record = {key: value for key, value in result.items() if key != "files"}

@@ -270,6 +270,35 @@ def test_a_run_that_stops_short_with_return_code_0_keeps_its_checkpoints(tmp_pat
     assert module.run_status(module.run_dir(root, spec), spec) == "finished"
 
 
+def test_a_run_its_stop_rule_ended_is_finished_and_drops_its_checkpoints(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
+    root = tmp_path / "raw"
+    module, spec, folder = one_run(root)
+    module.start_checkpoints(folder, spec)
+    # The training process's stop rule ended it after its evaluation at 100 of 300 steps: it says so in stopped.json
+    stopped = FAKE_RUN + '(folder / "stopped.json").write_text(\'{"num_timesteps": 150}\')\n'
+    monkeypatch.setattr(module, "train_command", lambda spec, log_folder: ["-c", stopped, "100"])
+    ok, message = module.store(module.run_one(spec), module.run_dir(root, spec), {})
+    assert ok, message
+    assert (module.run_dir(root, spec) / "stopped.json").is_file() and not folder.exists()
+    assert module.run_status(module.run_dir(root, spec), spec) == "finished"
+
+
+def test_a_run_another_runner_holds_is_left_to_it(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys):
+    root = tmp_path / "raw"
+    module, spec, _ = one_run(root)
+    monkeypatch.setattr(module, "train_command", lambda spec, log_folder: ["-c", FAKE_RUN, "100", "200", "300"])
+    other_runner = module.claim(root, spec)
+    assert other_runner is not None and module.claim(root, spec) is None, "one holder at a time"
+    assert module.main([*GRID, "--root", str(root), *ONE_RUN]) == 0
+    output = capsys.readouterr()
+    assert "taken by another runner, left to it" in output.out + output.err
+    assert not module.run_dir(root, spec).exists(), "neither trained nor emptied nor stored by the second runner"
+    module.release(other_runner)
+    assert module.main([*GRID, "--root", str(root), *ONE_RUN]) == 0
+    assert module.run_status(module.run_dir(root, spec), spec) == "finished"
+    assert module.claim(root, spec) is None, "a finished run is not taken again"
+
+
 def test_ray_runs_the_same_task(local_root: Path, tmp_path: Path):
     pytest.importorskip("ray")
     root = tmp_path / "raw"

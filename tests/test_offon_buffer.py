@@ -354,6 +354,36 @@ def test_end_open_episodes_with_optimize_memory_usage():
     np.testing.assert_allclose(buffer.mc_returns[:2, 0], [1 + 0.5 * (1 + 0.5 * 6), 1 + 0.5 * 6])
 
 
+def test_end_open_episodes_stops_the_n_step_window_at_the_cut():
+    # Episode A (rewards 1, 2) is cut by a reset after next observation 12; episode B (rewards 100, 100) terminates.
+    # A's last n-step target must be 2 + 0.5 * V(12), not 2 + 0.5 * 100 + 0.25 * 100 from B's rewards
+    buffer = make_buffer(buffer_class=OffOnNStepReplayBuffer, n_steps=3)
+    step(buffer, [1], [0], obs_ids=[10], next_obs_ids=[11])
+    step(buffer, [2], [0], obs_ids=[11], next_obs_ids=[12])
+    buffer.end_open_episodes()
+    assert not buffer.dones[1, 0], "left as stored until a transition follows it"
+    step(buffer, [100], [0], obs_ids=[40], next_obs_ids=[41])
+    assert buffer.dones[1, 0] and buffer.timeouts[1, 0], "stored as SB3 stores a time-limit truncation"
+    step(buffer, [100], [0], dones=[True], obs_ids=[41], next_obs_ids=[42])
+    samples = buffer._get_samples(np.array([0, 1]))
+    np.testing.assert_allclose(samples.rewards.reshape(-1), [1 + 0.5 * 2, 2])
+    np.testing.assert_allclose(samples.next_observations.reshape(-1), [12, 12])
+    np.testing.assert_allclose(samples.discounts.reshape(-1), [0.25, 0.5])
+    np.testing.assert_allclose(samples.dones.reshape(-1), [0, 0])  # truncation: the target bootstraps
+    inputs = buffer.lambda_inputs(np.array([1]), np.array([0]), GAMMA)
+    np.testing.assert_allclose(inputs["rewards"], [2])
+    np.testing.assert_allclose(inputs["discounts"], [0.5])
+
+
+def test_end_open_episodes_leaves_finished_episodes_flags_alone():
+    buffer = make_buffer(n_envs=2)
+    step(buffer, [1, 1], [0, 0], dones=[True, False])
+    buffer.end_open_episodes()
+    step(buffer, [1, 1], [0, 0])
+    assert buffer.dones[0].tolist() == [True, True]
+    assert buffer.timeouts[0].tolist() == [False, True], "env 0 terminated: it is not made a truncation"
+
+
 def test_pickle_drops_the_value_function_and_keeps_open_episodes():
     buffer = make_buffer()
     buffer.truncation_value_fn = lambda obs: np.zeros(len(obs))

@@ -386,6 +386,33 @@ def test_a_model_loaded_with_another_gamma_and_n_steps_builds_its_buffer_with_th
     assert loaded.replay_buffer_kwargs == {}, "the model's own values are not saved as the caller's buffer arguments"
 
 
+@pytest.mark.parametrize("saved_kwargs, key", [({"gamma": 0.9}, "gamma"), ({"n_steps": 3}, "n_steps")])
+def test_load_replay_buffer_with_other_discounting_names_it_and_keeps_the_buffer(tmp_path, saved_kwargs, key):
+    saved = paper_offon_dqn("MlpPolicy", "CartPole-v1", **saved_kwargs, **SMALL)
+    saved.learn(20)
+    saved.save_replay_buffer(tmp_path / "buffer.pkl")
+    model = paper_offon_dqn("MlpPolicy", "CartPole-v1", **SMALL)
+    own_buffer = model.replay_buffer
+    with pytest.raises(ValueError, match=rf"replay buffer's `{key}`"):
+        model.load_replay_buffer(tmp_path / "buffer.pkl")
+    assert model.replay_buffer is own_buffer
+
+
+def test_load_replay_buffer_with_the_same_discounting_loads_it(tmp_path):
+    saved = paper_offon_dqn("MlpPolicy", "CartPole-v1", n_steps=3, gamma=0.9, **SMALL)
+    saved.learn(20)
+    saved.save_replay_buffer(tmp_path / "buffer.pkl")
+    model = paper_offon_dqn("MlpPolicy", "CartPole-v1", n_steps=3, gamma=0.9, **SMALL)
+    model.load_replay_buffer(tmp_path / "buffer.pkl")
+    assert model.replay_buffer.pos == saved.replay_buffer.pos == 20
+    # SB3's way to ask a custom buffer for n-step returns: the model's n_steps stays 1, the buffer's is the kwargs'
+    kwargs = {"replay_buffer_class": OffOnNStepReplayBuffer, "replay_buffer_kwargs": {"n_steps": 4}}
+    custom = paper_offon_dqn("MlpPolicy", "CartPole-v1", **kwargs, **SMALL)
+    custom.learn(20)
+    custom.save_replay_buffer(tmp_path / "custom.pkl")
+    paper_offon_dqn("MlpPolicy", "CartPole-v1", **kwargs, **SMALL).load_replay_buffer(tmp_path / "custom.pkl")
+
+
 @pytest.mark.parametrize("name, value", [("mc_mixing", "Max"), ("mc_initial_prob", 7.0)])
 def test_load_checks_the_offon_arguments_it_is_given(tmp_path, name, value):
     paper_offon_dqn("MlpPolicy", "CartPole-v1", **SMALL).save(tmp_path / "model.zip")

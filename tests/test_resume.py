@@ -18,6 +18,7 @@ from stable_baselines3.common.callbacks import EvalCallback
 from stable_baselines3.common.monitor import Monitor
 
 from sb3_offon import OffOnDQN
+from sb3_offon.callbacks import StopOnMeanTrainingReward
 from sb3_offon.resume import Checkpoint, RunCheckpoint, cut_running_episodes, joined_monitor, resumed_seed
 from sb3_offon.train import main
 
@@ -168,6 +169,68 @@ def test_resume_keeps_the_budget(tmp_path: Path, monkeypatch: pytest.MonkeyPatch
         train(monkeypatch, tmp_path / "longer", "dqn", "--resume", str(cut / "checkpoint"), "-n", "5000")
     with pytest.raises(FileNotFoundError, match="no checkpoint there"):
         train(monkeypatch, tmp_path / "none", "dqn", "--resume", str(tmp_path / "nowhere"))
+
+
+def test_a_run_resumed_after_its_last_evaluation_keeps_them(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # A budget of 3,500 steps evaluated every 1,000: cut after the checkpoint at 3,072, the resumed part evaluates no
+    # more, and its file must still hold the three evaluations made before the cut
+    budget = ("-n", "3500")
+    with monkeypatch.context() as patch:
+        interrupt_after_checkpoint(patch, 3000)
+        cut = train(patch, tmp_path / "cut", "dqn", *budget)
+    assert Checkpoint.latest(cut / "checkpoint").num_timesteps == 3072
+    before = np.load(cut / "evaluations.npz")
+    resumed = train(monkeypatch, tmp_path / "resumed", "dqn", "--resume", str(cut), *budget)
+    after = np.load(resumed / "evaluations.npz")
+    np.testing.assert_array_equal(after["timesteps"], [1000, 2000, 3000])
+    np.testing.assert_array_equal(after["results"], before["results"])
+    assert not (cut / "checkpoint").exists(), "the run reached its budget"
+
+
+def test_a_damaged_checkpoint_is_named(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    with monkeypatch.context() as patch:
+        interrupt_after_checkpoint(patch, 1000)
+        cut = train(patch, tmp_path / "cut", "dqn")
+    checkpoint = Checkpoint.latest(cut / "checkpoint")
+    assert checkpoint.replay_buffer is True
+    (checkpoint.folder / "replay_buffer.pkl").unlink()
+    with pytest.raises(ValueError, match=r"lacks replay_buffer\.pkl"):
+        Checkpoint.latest(cut / "checkpoint")
+
+
+def stop_rule(threshold: float, window: int) -> str:
+    """The ``--hyperparams`` entry of a stop rule on the mean training episode length (the paper's CartPole rule)."""
+    settings = f"{{'threshold':{threshold},'window':{window},'episode_key':'l'}}"
+    return f"callback:[{{'sb3_offon.callbacks.StopOnMeanTrainingReward':{settings}}}]"
+
+
+def test_a_run_its_stop_rule_ends_is_finished(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # A mean length of 5 over 100 episodes: reached once the window is full, after the checkpoint at 1,024 steps
+    run = train(monkeypatch, tmp_path / "stopped", "dqn", hyperparams=(stop_rule(5, 100),))
+    record = json.loads((run / "stopped.json").read_text())
+    assert record["callback"] == "StopOnMeanTrainingReward" and 1024 < record["num_timesteps"] < BUDGET
+    assert np.load(run / "evaluations.npz")["timesteps"][-1] < BUDGET
+    assert not (run / "checkpoint").exists(), "a finished run leaves no checkpoint"
+
+
+def test_a_resumed_run_keeps_its_stop_rule_window(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    never = (stop_rule(10**9, 100),)
+    with monkeypatch.context() as patch:
+        interrupt_after_checkpoint(patch, 2000)
+        cut = train(patch, tmp_path / "cut", "dqn", hyperparams=never)
+    assert not (cut / "stopped.json").exists(), "cut short by Ctrl-C, not ended by its rule"
+    checkpoint = Checkpoint.latest(cut / "checkpoint")
+    ((name, state),) = checkpoint.callback_states
+    episodes = monitor_rows(cut / "0.monitor.csv")
+    assert name == "StopOnMeanTrainingReward" and state["n_episodes"] == len(episodes)
+    assert state["recent"] == [row[1] for row in episodes[-100:]], "the window holds the last 100 episode lengths"
+    restored = []
+    original = StopOnMeanTrainingReward.set_state
+    monkeypatch.setattr(StopOnMeanTrainingReward, "set_state", lambda self, s: (restored.append(s), original(self, s)))
+    train(monkeypatch, tmp_path / "resumed", "dqn", "--resume", str(cut), hyperparams=never)
+    assert restored == [state]
+    with pytest.raises(ValueError, match="resume a run with the callbacks it was started with"):
+        checkpoint.restore_callbacks([])
 
 
 def evaluation_callback(log_path: Path) -> EvalCallback:

@@ -255,3 +255,21 @@ def test_the_published_verdicts() -> None:
     assert decision == "holds"
     assert lines[0].endswith("holds on every env")
     assert "0.865 [0.828, 0.898] against 0.803 [0.758, 0.847]" in lines[1]
+
+
+def test_a_single_seed_gives_no_interval_and_no_verdict(tmp_path: Path) -> None:
+    # Far below DQN on Acrobot-v1, but with one run a side the difference has no interval: the criterion cannot pass
+    study_module = load_script("study")
+    root = tmp_path / "raw"
+    for env, candidate_value in [("CartPole-v1", 5.0), ("Acrobot-v1", -9.0)]:
+        write_run(root, "toy", "dqn", env, 1, [[2.0, 2.0]] * 3)
+        write_run(root, "toy", "offon_lambda_choice", env, 1, [[candidate_value, candidate_value]] * 3)
+    path = tmp_path / "toy.yml"
+    path.write_text(yaml.safe_dump({**STUDY, "seeds": [1]}))
+    study = study_module.Study.read(path)
+    decision, lines = study_module.verdict(study, *study_module.study_runs(study, root))
+    assert decision != "holds"
+    assert lines[0] == (
+        "open: final return not below DQN's on any env by the interval of the difference: "
+        "no interval on CartPole-v1 (a side has a single run)"
+    )

@@ -105,7 +105,10 @@ class OffOnBufferMixin:
     pos: int
     full: bool
     optimize_memory_usage: bool
+    handle_timeout_termination: bool
     observations: Any
+    dones: np.ndarray
+    timeouts: np.ndarray
     next_observations: Any
     rewards: np.ndarray
     device: th.device
@@ -125,6 +128,8 @@ class OffOnBufferMixin:
         self._n_adds = 0
         # Omega: per env, the absolute index of the running episode's first transition (_n_adds: none running yet)
         self.episode_starts = np.zeros(self.n_envs, dtype=np.int64)
+        # Episodes cut by end_open_episodes whose last transition (slot, envs) the next add() marks as a truncation
+        self._cuts_to_mark: tuple[int, np.ndarray] | None = None
 
     @property
     def episode_lengths(self) -> np.ndarray:
@@ -152,6 +157,7 @@ class OffOnBufferMixin:
             )
         # Buffers pickled before mc_truncation="drop" existed bootstrapped or cut their truncations: they keep doing so
         state.setdefault("drop_truncated_returns", False)
+        state.setdefault("_cuts_to_mark", None)
         self.__dict__.update(state)
 
     def add(
@@ -163,6 +169,11 @@ class OffOnBufferMixin:
         done: np.ndarray,
         infos: list[dict[str, Any]],
     ) -> None:
+        if self._cuts_to_mark is not None:
+            slot, envs = self._cuts_to_mark
+            self.timeouts[slot, envs] = True
+            self.dones[slot, envs] = True
+            self._cuts_to_mark = None
         # This action was taken at the next state of each running episode's previous transition
         action_ids = np.asarray(action).reshape(self.n_envs)
         running = self.episode_starts < self._n_adds
@@ -218,11 +229,24 @@ class OffOnBufferMixin:
 
         Called when the env is reset outside an episode end (a new ``learn()`` call), so that an episode that was cut
         off gets its returns, bootstrapped as any time-limit truncation (or left unknown, as any truncation, with
-        ``drop_truncated_returns``), and does not chain into the next one.
+        ``drop_truncated_returns``), and does not chain into the next one. Its last transition is marked done and
+        timed out, as SB3 stores a time-limit truncation, so that an n-step target's window (SB3's
+        ``NStepReplayBuffer``) stops there too instead of running on into the next episode's rewards: marked by the
+        next ``add()``, the first transition it could chain into, so that until then the buffer holds what was stored
+        (SB3's ``load_replay_buffer`` gives back a buffer's flags as they were saved).
+
+        With ``optimize_memory_usage`` (which SB3 allows only without ``handle_timeout_termination``) a cut cannot be
+        stored as a truncation: the flags are left as they are (SB3 marks the transition done when
+        ``reset_num_timesteps``), and the last transition's next observation is the slot the next episode's first
+        observation overwrites, so its one-step and λ targets bootstrap from that observation, as SB3's DQN's do.
         """
+        last = (self._n_adds - 1) % self.buffer_size
         running = np.flatnonzero(self.episode_starts < self._n_adds)
-        if len(running) > 0:
-            self._end_truncated(running, self._stored_next_observations((self._n_adds - 1) % self.buffer_size))
+        if len(running) == 0:
+            return
+        if self.handle_timeout_termination:
+            self._cuts_to_mark = (last, running)
+        self._end_truncated(running, self._stored_next_observations(last))
 
     def _stored_next_observations(self, slot: int) -> Any:
         if self.optimize_memory_usage:

@@ -182,6 +182,10 @@ class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, ChunkedMinibatchesMixi
         gets the model's ``gamma`` (and, for ``OffOnNStepReplayBuffer``, ``n_steps`` where the model's is above 1), so
         that returns and TD targets share one discount; a different value given here is a ``ValueError``.
     :param optimize_memory_usage: Enable a memory efficient variant of the replay buffer at a cost of more complexity.
+        SB3 allows it only without ``handle_timeout_termination``, so the one-step, n-step and λ targets take a
+        time-limit truncation for a termination (as SB3's DQN does with it); the Monte-Carlo returns still bootstrap
+        it per ``mc_truncation``. An episode cut by an env reset (a new ``learn()``) bootstraps from the next
+        episode's first observation, whose slot holds its next observation (as SB3's DQN's target does).
     :param n_steps: When n_step > 1, uses n-step returns for the TD targets; Sarsa then uses the action taken at the
         n-th next state. Monte-Carlo returns are unaffected. With ``mc_mixing="lambda"``, the lambda-return is taken
         over n-step returns (see above).
@@ -456,7 +460,23 @@ class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, ChunkedMinibatchesMixi
             cut off (each ends as a time-limit truncation, per ``mc_truncation``); if ``False``, they go on with this
             model's current env episodes (a buffer saved by this same live model, with no env reset in between).
         """
+        previous_buffer = self.replay_buffer
         super().load_replay_buffer(path, truncate_last_traj)
+        if isinstance(self.replay_buffer, OffOnBufferMixin):
+            # Its stored returns and its n-step windows were made with its own discounting: mixing them with this
+            # model's targets would train on two discounts at once
+            # (n_steps: the model's, or the buffer kwargs' where the model's is 1, as _buffer_discounting builds it)
+            expected = {"gamma": self.gamma, "n_steps": self.n_steps}
+            if self.n_steps == 1:
+                expected["n_steps"] = self.replay_buffer_kwargs.get("n_steps", 1)
+            for key, value in expected.items():
+                loaded = getattr(self.replay_buffer, key)
+                if loaded != value:
+                    self.replay_buffer = previous_buffer
+                    raise ValueError(
+                        f"The loaded replay buffer's `{key}` ({loaded!r}) differs from the model's ({value!r}): an Off-On "
+                        "buffer's returns and n-step windows are made with the model's discounting"
+                    )
         self._lambda_cache = None  # its slots were of the buffer it replaces
         self._connect_replay_buffer()
         if truncate_last_traj and isinstance(self.replay_buffer, OffOnBufferMixin):
