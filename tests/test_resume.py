@@ -9,6 +9,7 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import pytest
+import torch as th
 from gymnasium import spaces
 from helpers import interrupt_after_checkpoint
 from sb3_contrib import QRDQN
@@ -120,6 +121,57 @@ def test_an_interrupted_run_resumes_as_the_uninterrupted_one_goes(
     assert all(later[2] >= earlier[2] for earlier, later in itertools.pairwise(rows))
     # A run that reaches its budget leaves no checkpoint behind
     assert not (cut / "checkpoint").exists()
+
+
+def model_state(model: OffOnDQN) -> dict:
+    """What a resumed run must start from: networks, optimizer, counters and replay buffer, copied."""
+    buffer = model.replay_buffer
+    arrays = ("observations", "next_observations", "actions", "rewards", "timeouts", "mc_returns", "next_actions")
+    return {
+        "policy": {key: value.clone() for key, value in model.policy.state_dict().items()},
+        "optimizer": pickle.loads(pickle.dumps(model.policy.optimizer.state_dict())),
+        "counters": [getattr(model, name) for name in ("num_timesteps", "_n_calls", "_n_updates", "_episode_num")],
+        "buffer": {name: getattr(buffer, name).copy() for name in arrays},
+        "dones": buffer.dones.copy(),
+        "bookkeeping": (buffer.pos, buffer.full, buffer._n_adds),
+    }
+
+
+def test_the_resumed_model_is_the_checkpointed_one(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    states = {}
+    save, prepare = RunCheckpoint.save, Checkpoint.prepare
+
+    def save_and_keep(self: RunCheckpoint) -> Checkpoint:
+        states["live"] = model_state(self.model)
+        return save(self)
+
+    def prepare_and_keep(self: Checkpoint, model: OffOnDQN, *args: object) -> None:
+        prepare(self, model, *args)
+        states["loaded"] = model_state(model)
+
+    with monkeypatch.context() as patch:
+        patch.setattr(RunCheckpoint, "save", save_and_keep)
+        interrupt_after_checkpoint(patch, 2000)
+        cut = train(patch, tmp_path / "cut", "offon_dqn")
+    monkeypatch.setattr(Checkpoint, "prepare", prepare_and_keep)
+    train(monkeypatch, tmp_path / "resumed", "offon_dqn", "--resume", str(cut))
+    live, loaded = states["live"], states["loaded"]
+    assert live["counters"] == loaded["counters"] and live["bookkeeping"] == loaded["bookkeeping"]
+    for key, value in live["policy"].items():
+        assert th.equal(value, loaded["policy"][key]), key
+    for group, values in live["optimizer"]["state"].items():
+        for key, value in values.items():
+            assert th.equal(value, loaded["optimizer"]["state"][group][key]), (group, key)
+    # The buffer is the checkpoint's, but for the episode cut at the checkpoint: its last transition is now a
+    # truncation (done and timed out) and its returns, unknown while it ran, are closed (bootstrapped)
+    last = live["bookkeeping"][0] - 1
+    live_returns, loaded_returns = live["buffer"].pop("mc_returns"), loaded["buffer"]["mc_returns"]
+    for name, value in live["buffer"].items():
+        np.testing.assert_array_equal(np.delete(value, last, axis=0), np.delete(loaded["buffer"][name], last, axis=0), name)
+    assert loaded["dones"][last, 0] and loaded["buffer"]["timeouts"][last, 0]
+    running = np.isnan(live_returns[: last + 1, 0])
+    assert running[last] and not np.isnan(loaded_returns[: last + 1, 0]).any()
+    np.testing.assert_array_equal(live_returns[: last + 1][~running], loaded_returns[: last + 1][~running])
 
 
 def test_two_envs_resume_with_both_monitor_files(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
