@@ -222,14 +222,14 @@ class Checkpoint:
             # EvalCallback writes its file only when it evaluates: a run resumed after its last evaluation (a budget
             # that is not a multiple of eval_freq) would otherwise end with no file, its evaluations only in here
             os.makedirs(os.path.dirname(callback.log_path) or ".", exist_ok=True)
-            successes = {"successes": callback.evaluations_successes} if callback.evaluations_successes else {}
-            np.savez(
-                callback.log_path,
-                timesteps=callback.evaluations_timesteps,
-                results=callback.evaluations_results,
-                ep_lengths=callback.evaluations_length,
-                **successes,
-            )
+            arrays: dict[str, Any] = {
+                "timesteps": callback.evaluations_timesteps,
+                "results": callback.evaluations_results,
+                "ep_lengths": callback.evaluations_length,
+            }
+            if callback.evaluations_successes:
+                arrays["successes"] = callback.evaluations_successes
+            np.savez(callback.log_path, **arrays)
 
     def restore_callbacks(self, callbacks: Sequence[BaseCallback]) -> None:
         """
