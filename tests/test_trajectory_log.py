@@ -1,10 +1,11 @@
 """
-λ-returns checked end to end against a reference that never reads the buffer's bookkeeping.
+Monte-Carlo returns, next actions and λ-returns checked end to end against a reference that never reads the buffer's
+bookkeeping.
 
 The other λ tests compute their expected values from the buffer's own next actions and episode marks. Here random
 episodes (several envs whose episodes end at different steps, terminations, time-limit truncations, cuts by an env
-reset, a ring that wraps) are written both into the buffer and into a plain per-env log of what happened, and the
-λ-returns are recomputed from the log alone, by the recursion of ``sb3_offon.offon_dqn.lambda_returns``:
+reset, a ring that wraps) are written both into the buffer and into a plain per-env log of what happened; returns and
+next actions are recomputed from the log alone, the λ-returns by the recursion of ``sb3_offon.offon_dqn.lambda_returns``:
 
     G_t = R_t + gamma^k [(1 - λ c) V(s_{t+k}) + λ c G_{t+n}]
 
@@ -137,3 +138,46 @@ def test_lambda_returns_match_a_reference_from_the_trajectory_log(
     assert got.keys() == expected.keys()
     for key, value in expected.items():
         assert got[key] == pytest.approx(value, rel=1e-5, abs=1e-5), key
+
+
+def reference_episodes(steps: list[dict], drop_truncated: bool) -> tuple[list[float], list[int]]:
+    """
+    One env's Monte-Carlo returns (NaN: unknown) and next actions (-1: none) of every step, from its log alone: each
+    episode's returns backwards from its tail, V(s) = 0.3 s after a truncation or a cut (unknown with
+    ``drop_truncated``), 0 after a termination; a running episode's returns are not known yet.
+    """
+    returns, next_actions = [np.nan] * len(steps), [-1] * len(steps)
+    start = 0
+    for t, step in enumerate(steps):
+        if step["end"] is None:
+            if t + 1 < len(steps):
+                next_actions[t] = steps[t + 1]["action"]
+            continue
+        tail = 0.0 if step["end"] == "terminated" else 0.3 * float(step["next"])
+        if not (drop_truncated and step["end"] != "terminated"):
+            episode_return = tail
+            for u in reversed(range(start, t + 1)):
+                episode_return = steps[u]["reward"] + GAMMA * episode_return
+                returns[u] = episode_return
+        start = t + 1
+    return returns, next_actions
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize(
+    "n_envs, size, n_adds, n_steps, optimize_memory_usage",
+    [(3, 10, 47, 1, False), (2, 10, 47, 1, True), (2, 7, 60, 3, False), (3, 16, 9, 1, False)],
+)
+@pytest.mark.parametrize("drop_truncated", [False, True])
+def test_returns_and_next_actions_match_the_trajectory_log(
+    seed, n_envs, size, n_adds, n_steps, optimize_memory_usage, drop_truncated
+):
+    buffer = make_buffer(n_envs, size, n_steps, optimize_memory_usage)
+    buffer.truncation_value_fn = lambda observations: np.asarray(observations).reshape(-1) * 0.3
+    buffer.drop_truncated_returns = drop_truncated
+    log = play(buffer, n_adds, cuts=not optimize_memory_usage, seed=seed)
+    for env, steps in enumerate(log):
+        returns, next_actions = reference_episodes(steps, drop_truncated)
+        for t in range(max(0, n_adds - size), n_adds):
+            np.testing.assert_allclose(buffer.mc_returns[t % size, env], returns[t], rtol=1e-5, err_msg=f"{t}, {env}")
+            assert buffer.next_actions[t % size, env] == next_actions[t], (t, env)
