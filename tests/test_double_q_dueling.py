@@ -189,6 +189,34 @@ def test_lambda_returns_bootstrap_and_cut_traces_with_the_online_argmax(double_q
 # --- dueling networks --------------------------------------------------------------------------------------------------
 
 
+class NoisyExtractor(FlattenExtractor):
+    """A flatten extractor followed by BatchNorm and Dropout: layers whose training mode changes their output."""
+
+    def __init__(self, observation_space: gym.Space) -> None:
+        super().__init__(observation_space)
+        self.noise = nn.Sequential(nn.BatchNorm1d(self.features_dim), nn.Dropout(0.5))
+
+    def forward(self, observations: th.Tensor) -> th.Tensor:
+        return self.noise(super().forward(observations))
+
+
+@pytest.mark.parametrize("sarsa_target", ["sampled", "expected"])
+def test_the_online_argmax_at_next_states_is_taken_in_evaluation_mode(sarsa_target: str) -> None:
+    # As train() runs it: the networks in training mode. The online network's choice at s' must not draw Dropout masks
+    # (the same states, the same actions) nor move BatchNorm's running statistics with next states
+    kwargs = {"policy_kwargs": {"features_extractor_class": NoisyExtractor, "net_arch": [16]}, "sarsa_target": sarsa_target}
+    model = OffOnDQN("MlpPolicy", "CartPole-v1", double_q=True, seed=0, **PAPER_TARGETS, **kwargs)
+    model.policy.set_training_mode(True)
+    batch_norm = model.q_net.features_extractor.noise[0]
+    statistics = batch_norm.running_mean.clone()
+    observations = th.randn(256, 4) * 3 + 1
+    with th.no_grad():
+        first, second = model._bootstrap(observations)[1], model._bootstrap(observations)[1]
+    assert th.equal(first, second)
+    assert th.equal(batch_norm.running_mean, statistics)
+    assert model.q_net.training, "training mode is given back"
+
+
 def test_dueling_output_is_value_plus_advantage_minus_its_mean() -> None:
     model = OffOnDQN("MlpPolicy", "CartPole-v1", policy_kwargs=dict(dueling=True, net_arch=[]), device="cpu")
     head = model.q_net.q_net

@@ -42,6 +42,7 @@ class CoinFlipTargetsMixin:
     _to_device: Callable[[np.ndarray], th.Tensor]
     _loss_fn: Callable[[], Callable[[th.Tensor, th.Tensor], th.Tensor]]
     _bootstrap: Callable[[Any], tuple[th.Tensor, th.Tensor, th.Tensor]]
+    _online_greedy_actions: Callable[[Any], th.Tensor]
     _parameter_list: Callable[[], list[th.nn.Parameter]]
 
     def _train_on_coin_flip_targets(self, gradient_steps: int, batch_size: int) -> None:
@@ -180,7 +181,7 @@ class CoinFlipTargetsMixin:
         use_sarsa_tensor = self._to_device(use_sarsa)
         if self.sarsa_target == "expected":
             # Expectation under the behaviour policy: epsilon-greedy on the online network
-            behaviour_greedy = self.q_net(replay_data.next_observations).argmax(dim=1, keepdim=True)
+            behaviour_greedy = self._online_greedy_actions(replay_data.next_observations).reshape(-1, 1)
             greedy_values = th.gather(next_q_values_all, dim=1, index=behaviour_greedy)
             expected = self.exploration_rate * next_q_values_all.mean(dim=1, keepdim=True)
             expected = expected + (1.0 - self.exploration_rate) * greedy_values

@@ -482,6 +482,19 @@ class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, ChunkedMinibatchesMixi
         if truncate_last_traj and isinstance(self.replay_buffer, OffOnBufferMixin):
             self.replay_buffer.end_open_episodes()
 
+    def _online_greedy_actions(self, observations: th.Tensor | dict[str, th.Tensor]) -> th.Tensor:
+        """
+        argmax_a Q(s, a) of the online network, in evaluation mode, as when it acts: training mode would draw Dropout
+        masks into the choice and move BatchNorm's running statistics with next states (SB3's DQN never runs the
+        online network on them).
+        """
+        training = self.q_net.training
+        self.q_net.set_training_mode(False)
+        try:
+            return self.q_net(observations).argmax(dim=1)
+        finally:
+            self.q_net.set_training_mode(training)
+
     def _bootstrap(self, observations: th.Tensor | dict[str, th.Tensor]) -> tuple[th.Tensor, th.Tensor, th.Tensor]:
         """
         What a target bootstraps from at a batch of states s (on the device, under ``no_grad`` at the caller's).
@@ -495,7 +508,7 @@ class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, ChunkedMinibatchesMixi
             values, actions = q_values_all.max(dim=1)
             return q_values_all, actions, values
         # The online network picks, the target network evaluates (van Hasselt et al. 2016)
-        actions = self.q_net(observations).argmax(dim=1)
+        actions = self._online_greedy_actions(observations)
         return q_values_all, actions, th.gather(q_values_all, dim=1, index=actions.reshape(-1, 1)).reshape(-1)
 
     def _parameter_list(self) -> list[th.nn.Parameter]:
