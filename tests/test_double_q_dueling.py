@@ -280,6 +280,41 @@ def test_dueling_model_saves_and_loads(tmp_path: Path) -> None:
         assert th.equal(param, loaded_param), name
 
 
+def test_a_dueling_model_loads_into_sb3s_dqn_and_sb3s_into_offon_dqn(tmp_path: Path) -> None:
+    # OffOnDQN's policy class is saved with the model: SB3's DQN loads it and acts and trains the same network
+    model = OffOnDQN("MlpPolicy", "CartPole-v1", policy_kwargs=dict(dueling=True, net_arch=[16]), learning_starts=50, seed=0)
+    model.learn(200)
+    model.save(tmp_path / "dueling")
+    observations = np.random.default_rng(0).normal(size=(8, 4)).astype(np.float32)
+    sb3 = DQN.load(tmp_path / "dueling", env=model.get_env())
+    assert isinstance(sb3.q_net.q_net, DuelingHead)
+    np.testing.assert_array_equal(sb3.predict(observations, deterministic=True)[0], model.predict(observations, True)[0])
+    sb3.learn(100)
+    # And SB3's DQN file loads as OffOnDQN, which trains it
+    plain = DQN("MlpPolicy", "CartPole-v1", learning_starts=50, seed=0)
+    plain.learn(100)
+    plain.save(tmp_path / "plain")
+    loaded = OffOnDQN.load(tmp_path / "plain", env=plain.get_env())
+    np.testing.assert_array_equal(loaded.predict(observations, True)[0], plain.predict(observations, True)[0])
+    updates = loaded._n_updates
+    loaded.learn(100)
+    assert loaded._n_updates > updates
+
+
+def test_soft_target_updates_move_every_dueling_parameter() -> None:
+    kwargs = dict(policy_kwargs=dict(dueling=True, net_arch=[8]), tau=0.5, target_update_interval=1, learning_starts=10)
+    model = OffOnDQN("MlpPolicy", "CartPole-v1", seed=0, **kwargs)
+    before = {name: value.clone() for name, value in model.q_net_target.state_dict().items()}
+    model.learn(30)
+    after = model.q_net_target.state_dict()
+    assert before.keys() == after.keys() and any("value" in name for name in before)
+    for name, value in before.items():
+        assert not th.equal(value, after[name]), name
+        # Polyak averaging: each target parameter moved towards the online one
+        online = model.q_net.state_dict()[name]
+        assert (after[name] - online).abs().sum() < (value - online).abs().sum() + 1e-6, name
+
+
 @pytest.mark.parametrize(
     "policy, make_env",
     [
