@@ -175,3 +175,71 @@ def test_n_step_discounts_are_respected(model):
         data.next_actions >= 0, next_q.gather(1, data.next_actions.clamp(min=0)), next_q.max(1, keepdim=True).values
     )
     th.testing.assert_close(targets, data.rewards + (1 - data.dones) * 0.5 * bootstrap)
+
+
+@pytest.mark.parametrize("n_steps", [1, 3])
+@pytest.mark.parametrize("double_q", [False, True])
+def test_train_regresses_on_targets_rebuilt_from_the_stored_transitions(monkeypatch, n_steps: int, double_q: bool) -> None:
+    """
+    End to end through ``train()``: the targets it regresses on, rebuilt from the buffer's raw arrays (rewards, flags,
+    the action stored in the next slot, next observations), its draws and the two networks, with short episodes (a
+    15-step time limit) so that minibatches hold terminations, truncations and n-step windows cut by them.
+    """
+    import gymnasium as gym
+    from stable_baselines3.common.env_util import make_vec_env
+
+    from sb3_offon.offon_dqn import offon_dqn as offon_dqn_module
+
+    gamma, mc_prob, qlearning_prob, gradient_steps, batch_size = 0.9, 0.3, 0.4, 4, 16
+    env = make_vec_env(lambda: gym.make("CartPole-v1", max_episode_steps=15), n_envs=1, seed=3)
+    model = OffOnDQN(
+        "MlpPolicy", env, seed=0, double_q=double_q, n_steps=n_steps, gamma=gamma, learning_starts=10**6,
+        target_update_interval=10**6, exploration_final_eps=1.0, policy_kwargs=dict(net_arch=[8]), device="cpu",
+        **PAPER_TARGETS,
+    )  # fmt: skip
+    with th.no_grad():  # the online network apart from the target network, so that double Q shows
+        for parameter in model.q_net.parameters():
+            parameter.add_(th.randn_like(parameter))
+    model.learn(300)  # transitions only: learning starts later
+    captured = []
+
+    def capture(prediction: th.Tensor, target: th.Tensor) -> th.Tensor:
+        captured.append(target.detach().clone())
+        return th.nn.functional.smooth_l1_loss(prediction, target)
+
+    monkeypatch.setitem(offon_dqn_module.LOSS_FUNCTIONS, "huber", capture)
+    model.mc_schedule = lambda _: mc_prob
+    model.qlearning_schedule = lambda _: qlearning_prob
+    model.learning_rate, model.lr_schedule = 0.0, lambda _: 0.0  # the networks stay as they are
+    sampling_state, draws = np.random.get_state(), np.random.default_rng()
+    draws.bit_generator.state = model.target_rng.bit_generator.state
+    model.train(gradient_steps, batch_size)
+
+    np.random.set_state(sampling_state)  # the same minibatch indices as SB3's sample()
+    uniforms = draws.random((2, gradient_steps * batch_size, 1), dtype=np.float32)
+    buffer, stored = model.replay_buffer, model.replay_buffer.pos
+    rewards, actions = buffer.rewards[:stored, 0], buffer.actions[:stored, 0]
+    dones, timeouts = buffer.dones[:stored, 0].astype(bool), buffer.timeouts[:stored, 0].astype(bool)
+    next_observations = th.as_tensor(buffer.next_observations[:stored, 0])
+    with th.no_grad():
+        target_q, online_q = model.q_net_target(next_observations).numpy(), model.q_net(next_observations).numpy()
+    sample = 0
+    for step in range(gradient_steps):
+        for row, t in enumerate(np.random.randint(0, stored, size=batch_size)):
+            window_return, discount, last = 0.0, 1.0, t
+            for offset in range(n_steps):  # the n-step window, stopped by an episode's end or the newest transition
+                last = t + offset
+                window_return += discount * rewards[last]
+                discount *= gamma
+                if dones[last] or last == stored - 1:
+                    break
+            went_on = last - t + 1 == n_steps and not dones[last] and last < stored - 1
+            greedy = online_q[last].argmax() if double_q else target_q[last].argmax()
+            use_mc = not np.isnan(buffer.mc_returns[t, 0]) and uniforms[0, sample, 0] < mc_prob
+            use_sarsa = went_on and uniforms[1, sample, 0] >= qlearning_prob
+            terminated = dones[last] and not timeouts[last]
+            bootstrap = target_q[last][int(actions[last + 1, 0])] if use_sarsa else target_q[last][greedy]
+            expected = buffer.mc_returns[t, 0] if use_mc else window_return + (0.0 if terminated else discount * bootstrap)
+            assert captured[step][row, 0].item() == pytest.approx(expected, rel=1e-5, abs=1e-5), (step, row, t)
+            sample += 1
+    assert timeouts.any() and (dones & ~timeouts).any(), "the stored episodes end both ways"
