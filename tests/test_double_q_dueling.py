@@ -373,6 +373,9 @@ def test_bad_double_q_names_the_parameter(name: str, value) -> None:
 def test_bad_dueling_names_the_parameter() -> None:
     with pytest.raises(ValueError, match="`dueling` must be True or False"):
         OffOnDQN("MlpPolicy", "CartPole-v1", policy_kwargs=dict(dueling="yes"), device="cpu")
+    # NumPy's bools are bools, as for double_q
+    model = OffOnDQN("MlpPolicy", "CartPole-v1", policy_kwargs=dict(dueling=np.bool_(True)), double_q=np.bool_(True))
+    assert model.policy.dueling is True and isinstance(model.q_net.q_net, DuelingHead)
 
 
 # --- the policy's mode switch and parameter list (what SB3 calls at every env step) --------------------------------------

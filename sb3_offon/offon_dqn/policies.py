@@ -7,6 +7,7 @@ in the same order): OffOnDQN learns the same Q-network as DQN, and only the regr
 
 from typing import Any
 
+import numpy as np
 import torch as th
 from gymnasium import spaces
 from stable_baselines3.common.torch_layers import (
@@ -110,10 +111,10 @@ class OffOnDQNPolicy(DQNPolicy):
         optimizer_kwargs: dict[str, Any] | None = None,
         dueling: bool = False,
     ) -> None:
-        if not isinstance(dueling, bool):
+        if not isinstance(dueling, (bool, np.bool_)):  # (NumPy's bools, as double_q takes them)
             raise ValueError(f"`dueling` must be True or False, got {dueling!r}")
         # Set before DQNPolicy's constructor, which builds the networks through make_q_net
-        self.dueling = dueling
+        self.dueling = bool(dueling)
         super().__init__(
             observation_space,
             action_space,
