@@ -89,19 +89,27 @@ def joined_monitor(earlier: str | None, current: str) -> str:
     return "\n".join([*earlier_lines, *rows]) + "\n"
 
 
+def save_evaluations(callback: EvalCallback, path: str | Path) -> None:
+    """Write an ``EvalCallback``'s evaluations so far as it writes its ``evaluations.npz``."""
+    arrays: dict[str, Any] = {
+        "timesteps": callback.evaluations_timesteps,
+        "results": callback.evaluations_results,
+        "ep_lengths": callback.evaluations_length,
+    }
+    if callback.evaluations_successes:
+        arrays["successes"] = callback.evaluations_successes
+    np.savez(path, **arrays)
+
+
 def synced(folder: Path) -> None:
     """Flush every file under ``folder``, and the folder entries, to the disk (``fsync``)."""
-    for path in sorted(folder.rglob("*"), reverse=True):  # files before the folders that list them
+    # Files before the folders that list them, the folder itself last
+    for path in [*sorted(folder.rglob("*"), reverse=True), folder]:
         descriptor = os.open(path, os.O_RDONLY)
         try:
             os.fsync(descriptor)
         finally:
             os.close(descriptor)
-    descriptor = os.open(folder, os.O_RDONLY)
-    try:
-        os.fsync(descriptor)
-    finally:
-        os.close(descriptor)
 
 
 def stateful_callbacks(callbacks: Sequence[BaseCallback]) -> list[BaseCallback]:
@@ -222,14 +230,7 @@ class Checkpoint:
             # EvalCallback writes its file only when it evaluates: a run resumed after its last evaluation (a budget
             # that is not a multiple of eval_freq) would otherwise end with no file, its evaluations only in here
             os.makedirs(os.path.dirname(callback.log_path) or ".", exist_ok=True)
-            arrays: dict[str, Any] = {
-                "timesteps": callback.evaluations_timesteps,
-                "results": callback.evaluations_results,
-                "ep_lengths": callback.evaluations_length,
-            }
-            if callback.evaluations_successes:
-                arrays["successes"] = callback.evaluations_successes
-            np.savez(callback.log_path, **arrays)
+            save_evaluations(callback, callback.log_path)
 
     def restore_callbacks(self, callbacks: Sequence[BaseCallback]) -> None:
         """
@@ -401,14 +402,7 @@ class RunCheckpoint(BaseCallback):
         if self.eval_callback is not None:
             callback = self.eval_callback
             if callback.evaluations_timesteps:
-                arrays: dict[str, Any] = {
-                    "timesteps": callback.evaluations_timesteps,
-                    "results": callback.evaluations_results,
-                    "ep_lengths": callback.evaluations_length,
-                }
-                if callback.evaluations_successes:
-                    arrays["successes"] = callback.evaluations_successes
-                np.savez(target / EVALUATIONS_FILE, **arrays)
+                save_evaluations(callback, target / EVALUATIONS_FILE)
             state.update(best_mean_reward=float(callback.best_mean_reward), last_mean_reward=float(callback.last_mean_reward))
         (target / STATE_FILE).write_text(json.dumps(state, indent=2))
         # On disk before `latest` names it, so that a power cut cannot leave `latest` naming a checkpoint with empty files

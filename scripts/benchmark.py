@@ -599,18 +599,16 @@ def main(argv: list[str] | None = None) -> int:
     wall_times, failures = [], 0
     with bar:
         for n_done, result in enumerate(results, start=1):
+            spec = result["spec"]
             if result.get("skipped"):
-                spec = result["spec"]
-                bar.write(f"{spec['algo']} {spec['env']} seed {spec['seed']}: taken by another runner, left to it")
-                bar.update(spec["n_timesteps"])
-                bar.set_postfix_str(f"{n_done}/{len(todo)} runs" + (f", {failures} failed" if failures else ""))
-                continue
-            ok, message = store(result, run_dir(args.root, result["spec"]), code_version())
-            failures += not ok
-            if ok:
-                wall_times.append(result["wall_time_s"])
+                message = f"{spec['algo']} {spec['env']} seed {spec['seed']}: taken by another runner, left to it"
+            else:
+                ok, message = store(result, run_dir(args.root, spec), code_version())
+                failures += not ok
+                if ok:
+                    wall_times.append(result["wall_time_s"])
             bar.write(message)
-            bar.update(result["spec"]["n_timesteps"])
+            bar.update(spec["n_timesteps"])
             bar.set_postfix_str(f"{n_done}/{len(todo)} runs" + (f", {failures} failed" if failures else ""))
     if wall_times:
         print(

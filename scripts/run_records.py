@@ -46,7 +46,8 @@ def claim(root: Path, spec: dict) -> int | None:
     :return: the lock's file descriptor, or None when another process holds the run, or has finished it since this
         runner listed its runs (the lock is then not kept)
     """
-    path = checkpoint_dir(root, spec).with_name(f"{checkpoint_dir(root, spec).name}.lock")
+    checkpoints = checkpoint_dir(root, spec)
+    path = checkpoints.with_name(f"{checkpoints.name}.lock")
     path.parent.mkdir(parents=True, exist_ok=True)
     descriptor = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
     try:
