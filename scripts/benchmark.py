@@ -55,9 +55,7 @@ Usage::
 
 import argparse
 import concurrent.futures
-import functools
 import importlib.metadata
-import importlib.util
 import os
 import platform
 import shutil
@@ -71,16 +69,15 @@ from collections.abc import Iterator
 from datetime import datetime, timezone
 from pathlib import Path
 
-import yaml
 from tqdm import tqdm
 
-# run_records.py and study_file.py sit next to this script: importable however it is started (as a script, or loaded
-# from its path)
+# run_records.py, grid_specs.py and study_file.py sit next to this script: importable however it is started (as a
+# script, or loaded from its path)
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from grid_specs import available_sets, build_specs, candidate_specs, hyperparams_dir, parse_seeds, seeds_text
 from run_records import (
     IDENTITY,
     STOPPED_FILE,
-    checkpoint_dir,
     claim,
     env_folder,
     read_evaluations,
@@ -104,41 +101,6 @@ DEFAULT_ENVS = {
 KEEP_SUFFIXES = {".csv", ".npz", ".yml", ".yaml", ".txt", ".json"}
 KEEP_NAMES = {"vecnormalize.pkl", STOPPED_FILE}
 LOG_TAIL_LINES = 60
-
-
-def hyperparams_dir() -> Path:
-    """The bundled hyperparameter folder of the installed ``sb3_offon`` (found without importing it: no torch here)."""
-    spec = importlib.util.find_spec("sb3_offon")
-    if spec is None or not spec.submodule_search_locations:
-        raise SystemExit("sb3_offon is not installed in this interpreter: pip install -e '.[zoo,bench]'")
-    return Path(next(iter(spec.submodule_search_locations))) / "hyperparams"
-
-
-def available_sets() -> list[str]:
-    return ["tuned", *sorted(path.name for path in hyperparams_dir().iterdir() if path.is_dir())]
-
-
-def parse_seeds(tokens: list[str]) -> list[int]:
-    """``10``: seeds 0..9; ``0 3 7``: those seeds; ``5-9``: a range (inclusive)."""
-    if len(tokens) == 1 and tokens[0].isdigit():
-        return list(range(int(tokens[0])))
-    seeds: list[int] = []
-    for token in tokens:
-        first, _, last = token.partition("-")
-        seeds.extend(range(int(first), int(last or first) + 1))
-    return sorted(set(seeds))
-
-
-def seeds_text(seeds: list[int]) -> str:
-    """The seeds as ranges, ``0-9`` or ``20, 23-29``: printed before a grid runs, where ``--seeds 20`` (a count, seeds
-    0-19) would otherwise pass for seed 20."""
-    ranges: list[list[int]] = []
-    for seed in sorted(seeds):
-        if ranges and seed == ranges[-1][1] + 1:
-            ranges[-1][1] = seed
-        else:
-            ranges.append([seed, seed])
-    return ", ".join(str(first) if first == last else f"{first}-{last}" for first, last in ranges)
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -227,101 +189,6 @@ def from_study(args: argparse.Namespace, parser: argparse.ArgumentParser) -> Non
     args.eval_episodes = study.evaluation_episodes or args.eval_episodes
     args.device = args.device or study.device
     args.run_names, args.candidates = dict(study.run_names), dict(study.candidates)
-
-
-# ----------------------------------------------------------------------------------------------------------------------
-# The grid: one spec (a plain dict, sent to the task function) per run
-# ----------------------------------------------------------------------------------------------------------------------
-def config_file(hyperparams_set: str, algo: str) -> Path:
-    """The YAML file the zoo reads for ``algo`` in the set (a former name, ``hyperparams/aliases.yml``, reads its new
-    name's)."""
-    folder = hyperparams_dir()
-    algo = aliases(folder).get(algo, algo)
-    return folder / f"{algo}.yml" if hyperparams_set == "tuned" else folder / hyperparams_set / f"{algo}.yml"
-
-
-@functools.cache
-def aliases(folder: Path) -> dict[str, str]:
-    """The former names of algorithms (``hyperparams/aliases.yml``), read once."""
-    return yaml.safe_load((folder / "aliases.yml").read_text())
-
-
-def build_specs(args: argparse.Namespace) -> list[dict]:
-    """One spec per (algo, env, seed); the budget and settings are read from the set's YAML entry."""
-    specs = []
-    for algo in args.algos:
-        path = config_file(args.set, algo)
-        if not path.is_file():
-            raise SystemExit(f"No hyperparameter file {path} for --algo {algo} in the '{args.set}' set")
-        entries = yaml.safe_load(path.read_text())
-        for env in args.envs:
-            if env not in entries:
-                known = sorted(key for key in entries if key not in ("default", "atari"))
-                raise SystemExit(f"{path} has no entry for {env}: {known}")
-            yaml_budget = int(float(entries[env]["n_timesteps"]))
-            n_timesteps = args.n_timesteps or yaml_budget
-            eval_freq = args.eval_freq or max(n_timesteps // args.n_evals, 1)
-            if eval_freq > n_timesteps:
-                raise SystemExit(f"--eval-freq {eval_freq} is above the budget of {env} ({n_timesteps}): no evaluation")
-            hyperparams = list(args.hyperparams)
-            # The paper's epsilon reaches its final value at a fixed timestep (exploration_fraction = 1919 / budget
-            # in the YAML): keep that timestep when the budget is overridden (the YAML's own instruction)
-            fraction = entries[env].get("exploration_fraction")
-            overridden = any(item.startswith("exploration_fraction:") for item in hyperparams)
-            if args.set != "tuned" and n_timesteps != yaml_budget and fraction is not None and not overridden:
-                hyperparams.append(f"exploration_fraction:{min(1.0, float(fraction) * yaml_budget / n_timesteps):.6g}")
-            for seed in args.seeds:
-                specs.append(
-                    {
-                        "set": args.set,
-                        "grid": args.name or args.set,
-                        "algo": algo,
-                        **({"run_name": args.run_names[algo]} if algo in args.run_names else {}),
-                        "env": env,
-                        "seed": seed,
-                        "n_timesteps": n_timesteps,
-                        "eval_freq": eval_freq,
-                        "eval_episodes": args.eval_episodes,
-                        "hyperparams": hyperparams,
-                        "device": args.device or default_device(entries[env].get("policy", "MlpPolicy")),
-                        "threads": args.threads,
-                        "timeout": args.timeout,
-                        "checkpoint_freq": eval_freq if args.checkpoint_freq is None else args.checkpoint_freq,
-                    }
-                )
-                if specs[-1]["checkpoint_freq"] > 0:
-                    specs[-1]["checkpoint_dir"] = str(checkpoint_dir(args.root, specs[-1]).resolve())
-    return specs
-
-
-def candidate_specs(args: argparse.Namespace) -> list[dict]:
-    """
-    The runs of a study that chooses among candidates (``--study`` with ``candidates``; ``--algos`` names candidates):
-    each candidate's algorithm with its settings, on its envs and seeds, into its folder, as ``study_file.Study``
-    resolves them; ``--seeds`` keeps those of its seeds.
-    """
-    study: Study = args.study_file
-    specs = []
-    for name in args.algos:
-        algo = study.algo_of(name)
-        for env in study.envs_for(name):
-            if env not in args.envs:
-                continue
-            one = argparse.Namespace(**vars(args))
-            one.algos, one.envs = [algo], [env]
-            one.seeds = [seed for seed in study.seeds_for(name, env) if not args.seeds_given or seed in args.seeds]
-            one.hyperparams = study.hyperparams_for(name, env)
-            one.name, run_name = study.source(name, env)
-            one.eval_episodes = study.episodes_for(env, args.eval_episodes)
-            one.run_names = {algo: run_name} if run_name != algo else {}
-            specs += build_specs(one)
-    return specs
-
-
-def default_device(policy: str) -> str:
-    """Small MLPs train faster on one CPU thread per run than sharing a GPU (about 5x, measured: README, Speed); CNNs
-    the other way round."""
-    return "cpu" if policy == "MlpPolicy" else "auto"
 
 
 def run_threads(spec: dict) -> str:

@@ -75,10 +75,10 @@ def test_dry_run_of_the_tuned_set(tmp_path: Path):
 
 def test_the_grid_says_which_seeds_it_runs(tmp_path: Path):
     """A lone number is a count (``--seeds 20``: seeds 0-19), so the first line names the seeds, not only their number."""
-    module = load_script("benchmark")
-    assert module.seeds_text(module.parse_seeds(["20"])) == "0-19"
-    assert module.seeds_text(module.parse_seeds(["20-20"])) == "20"
-    assert module.seeds_text(module.parse_seeds(["29", "20", "23-28"])) == "20, 23-29"
+    grid_specs = load_script("grid_specs")
+    assert grid_specs.seeds_text(grid_specs.parse_seeds(["20"])) == "0-19"
+    assert grid_specs.seeds_text(grid_specs.parse_seeds(["20-20"])) == "20"
+    assert grid_specs.seeds_text(grid_specs.parse_seeds(["29", "20", "23-28"])) == "20, 23-29"
     output = check(benchmark(tmp_path, "--set", "tuned", "--envs", "CartPole-v1", "--seeds", "20", "23-24", "--dry-run"))
     assert output.splitlines()[0].startswith("6 runs (2 algos x 1 envs x 3 seeds (20, 23-24), 'tuned' set)"), output
 
@@ -97,9 +97,9 @@ def test_a_grid_named_apart_from_its_set(tmp_path: Path):
 
 
 def test_mlp_runs_train_on_the_cpu_unless_told_otherwise(tmp_path: Path):
-    module = load_script("benchmark")
-    assert module.default_device("MlpPolicy") == "cpu"
-    assert module.default_device("CnnPolicy") == "auto"
+    grid_specs = load_script("grid_specs")
+    assert grid_specs.default_device("MlpPolicy") == "cpu"
+    assert grid_specs.default_device("CnnPolicy") == "auto"
     for extra, device in [((), "cpu"), (("--device", "cuda"), "cuda")]:
         output = check(benchmark(tmp_path, "--dry-run", "--seeds", "1", *extra))
         commands = train_commands(output)
@@ -356,10 +356,10 @@ def test_a_study_file_gives_the_grid(tmp_path: Path):
 
 
 def test_a_former_name_reads_its_new_names_file():
-    module = load_script("benchmark")
-    assert module.config_file("tuned", "offon_lambda_choice") == module.config_file("tuned", "offon_dqn")
-    assert module.config_file("tuned", "offon_lambda_choice").name == "offon_dqn.yml"
-    assert module.config_file("paper", "offon_paper").parent.name == "paper"
+    grid_specs = load_script("grid_specs")
+    assert grid_specs.config_file("tuned", "offon_lambda_choice") == grid_specs.config_file("tuned", "offon_dqn")
+    assert grid_specs.config_file("tuned", "offon_lambda_choice").name == "offon_dqn.yml"
+    assert grid_specs.config_file("paper", "offon_paper").parent.name == "paper"
 
 
 def test_against_dqn_rows_from_hand_made_scores():
