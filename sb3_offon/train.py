@@ -7,10 +7,12 @@ Every flag of ``python -m rl_zoo3.train`` works (``--algo``, ``--env``, ``-n``, 
 ``-conf paper`` selects the paper's settings (see :mod:`sb3_offon.zoo`). String values need no quotes:
 ``--hyperparams mc_mixing:convex sarsa_target:expected`` (see :mod:`sb3_offon.cli_args`).
 
-Two additions to the zoo's command line: ``--help`` opens with the algorithms this package adds (read from
-:data:`sb3_offon.zoo.ALGOS`) and where their settings are documented, and an invalid value of one of OffOnDQN's own
+Additions to the zoo's command line: ``--help`` opens with the algorithms this package adds (read from
+:data:`sb3_offon.zoo.ALGOS`) and where their settings are documented; an invalid value of one of OffOnDQN's own
 arguments (``--hyperparams mc_mixing:foo``) ends with one line naming the argument and its allowed values, on stderr
-with exit status 2 as argparse's errors, instead of a traceback.
+with exit status 2 as argparse's errors, instead of a traceback; checkpoints to resume a run from (``--checkpoint-freq``,
+``--resume``); one torch thread unless ``--num-threads`` says otherwise; and denormal floats flushed to zero on the CPU
+unless ``--keep-denormals`` (see :func:`flush_denormals_unless_kept`).
 
 Example::
 
@@ -95,10 +97,37 @@ def one_thread_by_default(argv: list[str]) -> list[str]:
     return [*argv, "--num-threads", str(DEFAULT_NUM_THREADS)]
 
 
+def flush_denormals_unless_kept(argv: list[str]) -> bool:
+    """
+    Flush denormal floats to zero on the CPU (``torch.set_flush_denormal(True)``: the FTZ and DAZ modes of x86 CPUs),
+    unless ``argv`` has ``--keep-denormals``.
+
+    Why: an optimizer state that decays geometrically (RMSprop's and Adam's running averages, for weights whose
+    gradients stay zero, such as those of dead ReLU units) passes through the denormal range below 1.2e-38, where each
+    arithmetic operation on x86 costs tens of times a normal one. Late in a MinAtar run a quarter of QR-DQN's centred
+    RMSprop state was denormal and its gradient steps took twice as long as with them flushed (``scripts/bench_denormals.py``,
+    docs/speed.md). What flushing changes: values below 1.2e-38 become 0. A weight's running averages are that small
+    only after its gradients have stayed at or near zero (below about 1e-19) for hundreds of steps, and then its update,
+    the learning rate times the gradient over the square root of the average plus ``eps``, is zero or far below what
+    float32 can add to the weight, flushed or not: in the measurements and in tests/test_denormals.py the parameters
+    came out bit-identical, only the optimizer state's denormal entries differed. The mode belongs to the calling
+    thread, the one that trains (threads it starts later inherit it); the GPU's arithmetic is not affected.
+
+    :param argv: the command line's arguments (without the program name)
+    :return: whether denormals are flushed (False with ``--keep-denormals``, or on a CPU without the modes)
+    """
+    if "--keep-denormals" in argv:
+        return False
+    import torch
+
+    return bool(torch.set_flush_denormal(True))
+
+
 def add_checkpoint_arguments(parser: argparse.ArgumentParser) -> None:
     """
     The options this package adds to the zoo's: checkpoints from which an interrupted run goes on (:mod:`sb3_offon.resume`;
-    the zoo's ``--save-freq`` saves models, and its ``-i`` starts a new run from one).
+    the zoo's ``--save-freq`` saves models, and its ``-i`` starts a new run from one), and ``--keep-denormals``
+    (:func:`flush_denormals_unless_kept`).
 
     :param parser: the zoo's parser
     """
@@ -121,6 +150,13 @@ def add_checkpoint_arguments(parser: argparse.ArgumentParser) -> None:
         help="go on with the run checkpointed in this folder (or in the checkpoint/ folder of this run folder), to its "
         "budget (-n must be the run's): its step count, schedules, evaluations and monitor files go on, in a new run "
         "folder; the random generators are seeded afresh from --seed and the step",
+    )
+    parser.add_argument(
+        "--keep-denormals",
+        action="store_true",
+        help="compute with denormal floats (below 1.2e-38) on the CPU as IEEE 754 says; by default they are flushed to "
+        "zero, which makes long runs up to twice as fast (optimizer states that decay into that range) and left the "
+        "parameters bit-identical where measured: docs/speed.md",
     )
 
 
@@ -221,6 +257,7 @@ def main() -> None:
     # ``--hyperparams mc_mixing:convex``: unquoted strings (the zoo alone needs "mc_mixing:'convex'")
     use_tolerant_store_dict()
     sys.argv[1:] = one_thread_by_default(sys.argv[1:])
+    flush_denormals_unless_kept(sys.argv[1:])
     with argument_errors_in_one_line(), unknown_env_in_one_line():
         zoo_train.train()
 

@@ -1,0 +1,99 @@
+"""
+Denormal floats flushed to zero (the command line's default, ``sb3_offon.train.flush_denormals_unless_kept``): the mode
+is set unless ``--keep-denormals``, and training from an optimizer state holding denormals gives the same parameters
+with and without it.
+"""
+
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+import torch as th
+from stable_baselines3 import DQN
+
+from sb3_offon import OffOnDQN
+from sb3_offon.qrdqn import QRDQN
+from sb3_offon.train import flush_denormals_unless_kept
+
+# The smallest normal float32; below it (and above 0) a float is denormal
+SMALLEST_NORMAL = float(np.finfo(np.float32).tiny)
+DENORMAL = 1e-39
+
+
+def flushes() -> bool:
+    """Whether this thread flushes denormals now: a denormal input then reads as zero."""
+    return bool((th.tensor([DENORMAL]) * 2.0).item() == 0.0)
+
+
+@pytest.fixture
+def ieee_denormals() -> Iterator[None]:
+    """Every test starts and ends with denormals computed as IEEE 754 says (the mode outlives a test otherwise)."""
+    th.set_flush_denormal(False)
+    yield
+    th.set_flush_denormal(False)
+
+
+def denormal_count(model: DQN) -> int:
+    """Entries of the optimizer's running averages strictly between 0 and the smallest normal float."""
+    count = 0
+    for state in model.policy.optimizer.state.values():
+        for value in state.values():
+            if th.is_tensor(value) and value.is_floating_point() and value.dim() > 0:
+                magnitude = value.abs()
+                count += int(((magnitude > 0) & (magnitude < SMALLEST_NORMAL)).sum())
+    return count
+
+
+def test_the_command_line_flushes_unless_told_to_keep_them(ieee_denormals: None) -> None:
+    assert not flushes()
+    assert flush_denormals_unless_kept(["--algo", "dqn", "--keep-denormals"]) is False
+    assert not flushes(), "--keep-denormals leaves IEEE arithmetic"
+    if not flush_denormals_unless_kept(["--algo", "dqn"]):
+        pytest.skip("this CPU has no flush-to-zero mode")
+    assert flushes()
+
+
+def trained_with_denormals(algo: type[DQN], flush: bool) -> DQN:
+    """
+    A model trained a little on CartPole-v1 with centred RMSprop (the MinAtar settings' optimizer), then with a third of
+    its optimizer's running averages made denormal (as the state of weights whose gradients stay zero decays into),
+    then trained 50 more gradient steps with or without flushing.
+    """
+    model = algo(
+        "MlpPolicy",
+        "CartPole-v1",
+        learning_starts=200,
+        train_freq=1,
+        target_update_interval=50,
+        policy_kwargs=dict(
+            net_arch=[32], optimizer_class=th.optim.RMSprop, optimizer_kwargs=dict(alpha=0.95, eps=0.01, centered=True)
+        ),
+        seed=0,
+        device="cpu",
+    )
+    model.learn(400)
+    generator = th.Generator().manual_seed(0)
+    for state in model.policy.optimizer.state.values():
+        chosen = th.rand(state["square_avg"].shape, generator=generator) < 1 / 3
+        # Both averages of a weight, so that the variance estimate square_avg - grad_avg**2 stays >= 0
+        state["square_avg"][chosen] = DENORMAL
+        state["grad_avg"][chosen] = DENORMAL * th.where(state["grad_avg"][chosen] < 0, -1.0, 1.0)
+    assert denormal_count(model) > 100
+    th.set_flush_denormal(flush)
+    np.random.seed(1)
+    th.manual_seed(1)
+    model.train(gradient_steps=50, batch_size=32)
+    th.set_flush_denormal(False)
+    return model
+
+
+@pytest.mark.parametrize("algo", [OffOnDQN, DQN, QRDQN])
+def test_flushing_leaves_the_parameters_as_they_are(algo: type[DQN], ieee_denormals: None) -> None:
+    if not th.set_flush_denormal(False):
+        pytest.skip("this CPU has no flush-to-zero mode")
+    kept = trained_with_denormals(algo, flush=False)
+    flushed = trained_with_denormals(algo, flush=True)
+    assert denormal_count(kept) > 0 and denormal_count(flushed) == 0, "the arithmetic did differ"
+    flushed_parameters = flushed.policy.state_dict()
+    for name, kept_parameter in kept.policy.state_dict().items():
+        assert th.equal(kept_parameter, flushed_parameters[name]), name
