@@ -4,8 +4,6 @@ is set unless ``--keep-denormals``, and training from an optimizer state holding
 with and without it.
 """
 
-from collections.abc import Iterator
-
 import numpy as np
 import pytest
 import torch as th
@@ -25,14 +23,6 @@ def flushes() -> bool:
     return bool((th.tensor([DENORMAL]) * 2.0).item() == 0.0)
 
 
-@pytest.fixture
-def ieee_denormals() -> Iterator[None]:
-    """Every test starts and ends with denormals computed as IEEE 754 says (the mode outlives a test otherwise)."""
-    th.set_flush_denormal(False)
-    yield
-    th.set_flush_denormal(False)
-
-
 def denormal_count(model: DQN) -> int:
     """Entries of the optimizer's running averages strictly between 0 and the smallest normal float."""
     count = 0
@@ -44,7 +34,8 @@ def denormal_count(model: DQN) -> int:
     return count
 
 
-def test_the_command_line_flushes_unless_told_to_keep_them(ieee_denormals: None) -> None:
+def test_the_command_line_flushes_unless_told_to_keep_them() -> None:
+    # conftest.py's ieee_denormals fixture starts every test with IEEE arithmetic
     assert not flushes()
     assert flush_denormals_unless_kept(["--algo", "dqn", "--keep-denormals"]) is False
     assert not flushes(), "--keep-denormals leaves IEEE arithmetic"
@@ -88,7 +79,7 @@ def trained_with_denormals(algo: type[DQN], flush: bool) -> DQN:
 
 
 @pytest.mark.parametrize("algo", [OffOnDQN, DQN, QRDQN])
-def test_flushing_leaves_the_parameters_as_they_are(algo: type[DQN], ieee_denormals: None) -> None:
+def test_flushing_leaves_the_parameters_as_they_are(algo: type[DQN]) -> None:
     if not th.set_flush_denormal(False):
         pytest.skip("this CPU has no flush-to-zero mode")
     kept = trained_with_denormals(algo, flush=False)
