@@ -1,12 +1,17 @@
 """
 Denormal floats flushed to zero (the command line's default, ``sb3_offon.train.flush_denormals_unless_kept``): the mode
 is set unless ``--keep-denormals``, and training from an optimizer state holding denormals gives the same parameters
-with and without it.
+with and without it; ``scripts/bench_denormals.py`` compares the two from a checkpoint.
 """
+
+import json
+import subprocess
+import sys
 
 import numpy as np
 import pytest
 import torch as th
+from helpers import SCRIPTS
 from stable_baselines3 import DQN
 
 from sb3_offon import OffOnDQN
@@ -88,3 +93,27 @@ def test_flushing_leaves_the_parameters_as_they_are(algo: type[DQN]) -> None:
     flushed_parameters = flushed.policy.state_dict()
     for name, kept_parameter in kept.policy.state_dict().items():
         assert th.equal(kept_parameter, flushed_parameters[name]), name
+
+
+def test_the_benchmark_compares_both_arithmetics_from_a_checkpoint(tmp_path) -> None:
+    # scripts/bench_denormals.py on a checkpoint laid out as benchmark.py keeps them (<run>/<step>/); no speed asserted
+    model = trained_with_denormals(DQN, flush=False)
+    checkpoint = tmp_path / "CartPole-v1_0" / "400"
+    checkpoint.mkdir(parents=True)
+    model.save(checkpoint / "model.zip")
+    model.save_replay_buffer(checkpoint / "replay_buffer.pkl")
+    (checkpoint / "checkpoint.json").write_text(json.dumps({"num_timesteps": 400}))
+    arguments = ["--algo", "dqn", "--gradient-steps", "20", "--pairs", "2", "--output", str(tmp_path / "out")]
+    finished = subprocess.run(
+        [sys.executable, str(SCRIPTS / "bench_denormals.py"), str(checkpoint), *arguments],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert finished.returncode == 0, finished.stderr[-3000:]
+    record = json.loads((tmp_path / "out" / "denormals_dqn_CartPole-v1_0_400.json").read_text())
+    assert record["run"] == "CartPole-v1_0" and record["num_timesteps"] == 400
+    assert 0 < record["denormal_share_of_optimizer_state"] < 1
+    assert [row["ieee_first"] for row in record["rows"]] == [True, False], "the pairs take turns"
+    assert record["parameters_identical"] is True
+    assert "bit-identical" in (tmp_path / "out" / "denormals_dqn_CartPole-v1_0_400.md").read_text()
