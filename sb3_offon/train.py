@@ -123,7 +123,7 @@ def flush_denormals_unless_kept(argv: list[str]) -> bool:
     return bool(torch.set_flush_denormal(True))
 
 
-def add_checkpoint_arguments(parser: argparse.ArgumentParser) -> None:
+def add_package_arguments(parser: argparse.ArgumentParser) -> None:
     """
     The options this package adds to the zoo's: checkpoints from which an interrupted run goes on (:mod:`sb3_offon.resume`;
     the zoo's ``--save-freq`` saves models, and its ``-i`` starts a new run from one), and ``--keep-denormals``
@@ -163,7 +163,7 @@ def add_checkpoint_arguments(parser: argparse.ArgumentParser) -> None:
 class DescribedArgumentParser(argparse.ArgumentParser):
     """
     An ``argparse.ArgumentParser`` whose help opens with :func:`help_description` (before the long usage line), with the
-    options of :func:`add_checkpoint_arguments`.
+    options of :func:`add_package_arguments`.
     """
 
     description_text = ""
@@ -171,7 +171,7 @@ class DescribedArgumentParser(argparse.ArgumentParser):
     def __init__(self, *args, **kwargs) -> None:  # type: ignore[no-untyped-def]
         kwargs.setdefault("prog", prog())
         super().__init__(*args, **kwargs)
-        add_checkpoint_arguments(self)
+        add_package_arguments(self)
 
     def format_help(self) -> str:
         """The description as it is written, then argparse's help (usage, options)."""
