@@ -61,8 +61,8 @@ def load(args: argparse.Namespace) -> OffPolicyAlgorithm:
     return model
 
 
-def denormal_share(model: OffPolicyAlgorithm) -> float:
-    """The share of the optimizer state's float entries that are denormal."""
+def denormal_entries(model: OffPolicyAlgorithm) -> tuple[int, int]:
+    """The optimizer state's float entries that are denormal (strictly between 0 and the smallest normal), and all."""
     denormal, total = 0, 0
     for state in model.policy.optimizer.state.values():
         for value in state.values():
@@ -70,7 +70,7 @@ def denormal_share(model: OffPolicyAlgorithm) -> float:
                 magnitude = value.abs()
                 denormal += int(((magnitude > 0) & (magnitude < SMALLEST_NORMAL)).sum())
                 total += value.numel()
-    return denormal / max(total, 1)
+    return denormal, total
 
 
 def timed_round(args: argparse.Namespace, flush: bool) -> tuple[float, dict[str, th.Tensor]]:
@@ -98,7 +98,8 @@ def main() -> None:
     state_file = args.checkpoint / "checkpoint.json"
     step = json.loads(state_file.read_text())["num_timesteps"] if state_file.is_file() else "unknown"
     run = args.checkpoint.resolve().parent.name  # benchmark.py's checkpoints sit in <env>_<seed>/<step>/
-    share = denormal_share(load(args))
+    denormal, total = denormal_entries(load(args))
+    share = denormal / max(total, 1)
     rows, identical = [], True
     for pair in range(args.pairs):
         order = [False, True] if pair % 2 == 0 else [True, False]

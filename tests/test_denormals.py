@@ -11,16 +11,16 @@ import sys
 import numpy as np
 import pytest
 import torch as th
-from helpers import SCRIPTS
+from helpers import SCRIPTS, load_script
 from stable_baselines3 import DQN
 
 from sb3_offon import OffOnDQN
 from sb3_offon.qrdqn import QRDQN
 from sb3_offon.train import flush_denormals_unless_kept
 
-# The smallest normal float32; below it (and above 0) a float is denormal
-SMALLEST_NORMAL = float(np.finfo(np.float32).tiny)
 DENORMAL = 1e-39
+# scripts/bench_denormals.py's count of an optimizer state's denormal entries
+BENCH_DENORMALS = load_script("bench_denormals")
 
 
 def flushes() -> bool:
@@ -30,13 +30,7 @@ def flushes() -> bool:
 
 def denormal_count(model: DQN) -> int:
     """Entries of the optimizer's running averages strictly between 0 and the smallest normal float."""
-    count = 0
-    for state in model.policy.optimizer.state.values():
-        for value in state.values():
-            if th.is_tensor(value) and value.is_floating_point() and value.dim() > 0:
-                magnitude = value.abs()
-                count += int(((magnitude > 0) & (magnitude < SMALLEST_NORMAL)).sum())
-    return count
+    return BENCH_DENORMALS.denormal_entries(model)[0]
 
 
 def test_the_command_line_flushes_unless_told_to_keep_them() -> None:
