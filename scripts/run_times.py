@@ -17,6 +17,7 @@ import argparse
 import json
 import statistics
 import subprocess
+import sys
 from pathlib import Path
 
 
@@ -112,7 +113,8 @@ def main() -> None:
     ]
     print("\n".join(text))
     if args.out:
-        args.out.write_text("\n".join(text) + "\n")
+        command = " ".join(["python scripts/run_times.py", *sys.argv[1:]])
+        args.out.write_text("\n".join(["# Run times", "", f"`{command}`", "", *text]) + "\n")
 
 
 if __name__ == "__main__":

@@ -64,6 +64,7 @@ def test_command_line_writes_the_tables(tmp_path: Path):
     )
     assert result.returncode == 0, result.stderr
     text = out.read_text()
+    assert text.startswith(f"# Run times\n\n`python scripts/run_times.py {grid} --out {out}`")
     assert "4 runs, 3 of them whole" in text
     assert "| dqn | vm | 3 | 30.0 | 20.0 | 50.0 |" in text
     command = [sys.executable, str(SCRIPTS / "run_times.py"), str(tmp_path / "none")]
