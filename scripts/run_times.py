@@ -14,17 +14,22 @@ Usage::
 """
 
 import argparse
+import functools
 import json
 import statistics
 import subprocess
 import sys
 from pathlib import Path
 
+# The other scripts sit next to this one: importable however it is started
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from run_records import DONE
+
 
 def read_records(grid: Path) -> list[dict]:
     """One row per finished run under ``grid`` (``<grid>/<algo>/<env>_<seed>/done.json``, return code 0)."""
     rows = []
-    for path in sorted(grid.glob("*/*/done.json")):
+    for path in sorted(grid.glob(f"*/*/{DONE}")):
         record = json.loads(path.read_text())
         if record.get("returncode") != 0:
             continue
@@ -44,11 +49,13 @@ def read_records(grid: Path) -> list[dict]:
     return rows
 
 
+@functools.cache  # many runs share a commit: one git call for each
 def contains(commit: str, ancestor: str) -> bool | None:
     """Whether ``commit`` contains ``ancestor`` in this repository's history; None when git cannot tell."""
     if not commit:
         return None
-    result = subprocess.run(["git", "merge-base", "--is-ancestor", ancestor, commit], capture_output=True)
+    command = ["git", "merge-base", "--is-ancestor", ancestor, commit]
+    result = subprocess.run(command, capture_output=True, cwd=Path(__file__).resolve().parent)
     return {0: True, 1: False}.get(result.returncode)
 
 
