@@ -104,7 +104,7 @@ def seed_subset(study: Study, seeds: list[int]) -> Study:
         seeds=[seed for seed in study.seeds if seed in keep],
         seeds_on={env: [seed for seed in env_seeds if seed in keep] for env, env_seeds in study.seeds_on.items()},
     )
-    empty = [env for env in sorted(study.envs) if not narrowed.seeds_for(narrowed.candidate or "", env)]
+    empty = [env for env in sorted(study.envs) if not narrowed.seeds_on.get(env, narrowed.seeds)]
     if empty:
         raise ValueError(f"--seeds: none of {keep} is a seed of {', '.join(empty)} in {study.path}")
     return narrowed
