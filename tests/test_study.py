@@ -298,3 +298,14 @@ def test_an_interim_look_on_the_seeds_every_run_is_in(tmp_path: Path, monkeypatc
         study_module.main([str(path), "--root", str(root), "--seeds", "1", "9"])  # 9 is not a seed of the study
     with pytest.raises(ValueError, match="not among the study's seeds"):
         study_module.seed_subset(study_module.Study.read(path), [9])
+
+
+def test_an_interim_look_needs_a_seed_on_every_env(tmp_path: Path) -> None:
+    # Seeds per env (``seeds_on``): seed 1 is CartPole-v1's only, so narrowing to it would leave Acrobot-v1 without a run
+    study_module = load_script("study")
+    path = tmp_path / "toy.yml"
+    path.write_text(yaml.safe_dump({**STUDY, "seeds_on": {"CartPole-v1": [1, 2], "Acrobot-v1": [2, 3]}}))
+    study = study_module.Study.read(path)
+    assert study_module.seed_subset(study, [2]).seeds_on == {"CartPole-v1": [2], "Acrobot-v1": [2]}
+    with pytest.raises(ValueError, match=r"none of \[1\] is a seed of Acrobot-v1"):
+        study_module.seed_subset(study, [1])
