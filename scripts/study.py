@@ -15,7 +15,7 @@ Usage::
 
     python scripts/study.py benchmarks/minatar.yml                # tables, figures and verdict into results/minatar/
     python scripts/study.py benchmarks/minatar.yml --setup-check --random results/minatar/random_policy.json
-    python scripts/study.py benchmarks/minatar.yml --seeds 40 41 43   # into results/minatar/seeds_40_41_43/
+    python scripts/study.py benchmarks/minatar.yml --seeds 40 41 42 43   # into results/minatar/seeds_40_41_42_43/
 """
 
 import argparse
