@@ -295,12 +295,14 @@ def main(argv: list[str] | None = None) -> str:
         if args.setup_check:
             parser.error("--seeds does not apply to --setup-check (its seeds are the check's own)")
         try:
-            full_study, study = study, seed_subset(study, args.seeds)
+            narrowed = seed_subset(study, args.seeds)
         except ValueError as error:
             parser.error(str(error))
-        out = args.out or out / f"seeds_{'_'.join(map(str, study.seeds))}"
-        decision = report(study, args.root, out, subset=study.seeds)
-        print(f"{full_study.name}, seeds {', '.join(map(str, study.seeds))} only (interim): {decision}")
+        # Named by the seeds asked for: a seed of one env's ``seeds_on`` only is not among the narrowed study's ``seeds``
+        seeds = sorted(set(args.seeds))
+        out = args.out or out / f"seeds_{'_'.join(map(str, seeds))}"
+        decision = report(narrowed, args.root, out, subset=seeds)
+        print(f"{study.name}, seeds {', '.join(map(str, seeds))} only (interim): {decision}")
         return decision
     if args.setup_check:
         if args.random is None:

@@ -310,3 +310,14 @@ def test_an_interim_look_needs_a_seed_on_every_env(tmp_path: Path) -> None:
     assert study_module.seed_subset(study, [2]).seeds_on == {"CartPole-v1": [2], "Acrobot-v1": [2]}
     with pytest.raises(ValueError, match=r"none of \[1\] is a seed of Acrobot-v1"):
         study_module.seed_subset(study, [1])
+
+
+def test_an_interim_look_is_named_by_the_seeds_asked_for(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # Seed 5 is a seed of both envs through ``seeds_on`` only, not of the study's ``seeds``: the look is still on seed 5
+    study_module = load_script("study")
+    path, root = write_study(tmp_path, {env: [3.0, 4.0, 5.0, 6.0] for env in ENVS})
+    path.write_text(yaml.safe_dump({**yaml.safe_load(path.read_text()), "seeds_on": {env: [1, 5] for env in ENVS}}))
+    monkeypatch.chdir(tmp_path)
+    study_module.main([str(path), "--root", str(root), "--seeds", "5"])
+    table = (tmp_path / "results" / "toy" / "seeds_5" / "table.md").read_text()
+    assert "An interim look at seeds 5 only" in table and "**On seeds 5 only:" in table and "**Verdict:" not in table
