@@ -220,7 +220,7 @@ def test_interval_estimates_do_not_depend_on_the_other_algorithms() -> None:
 
 
 # The committed studies: the reporter writes each committed table.md (and verdict.md) again from the committed runs
-COMMITTED = ["paper", "tuned", "headtohead", "headtohead2"]
+COMMITTED = ["paper", "tuned", "headtohead", "headtohead2", "minatar"]
 
 
 @pytest.mark.parametrize("name", COMMITTED)
@@ -255,6 +255,18 @@ def test_the_published_verdicts() -> None:
     assert decision == "holds"
     assert lines[0].endswith("holds on every env")
     assert "0.865 [0.828, 0.898] against 0.803 [0.758, 0.847]" in lines[1]
+    # MinAtar: the rule (against DQN) holds; against QR-DQN, reported beside it, neither criterion does
+    minatar = study_module.Study.read(benchmarks / "minatar.yml")
+    runs, scores = study_module.study_runs(minatar, raw)
+    decision, lines = study_module.verdict(minatar, runs, scores)
+    assert decision == "holds" and lines[1] == "holds: IQM of normalised AUC above DQN's: 0.473 [0.406, 0.531] against 0.227 [0.174, 0.285]"
+    rule = load_script("rule")
+    below_qrdqn = rule.final_not_below(minatar, runs, scores, "offon_lambda_choice", "qrdqn", 0.0, sorted(minatar.envs))
+    assert below_qrdqn[0] is False and "MinAtar/SpaceInvaders-v0" not in below_qrdqn[1]
+    for game in ("Asterix", "Freeway", "Seaquest"):
+        assert f"MinAtar/{game}-v0 (-" in below_qrdqn[1]
+    iqms = rule.iqm_intervals(minatar, runs, scores, "auc")
+    assert iqms["qrdqn"][1] > iqms["offon_lambda_choice"][2]  # QR-DQN's interval wholly above the defaults'
 
 
 def test_a_single_seed_gives_no_interval_and_no_verdict(tmp_path: Path) -> None:
