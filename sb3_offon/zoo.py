@@ -64,6 +64,7 @@ ALGOS: dict[str, type[BaseAlgorithm]] = {
     "offon_mc_decay": OffOnDQN,
     "offon_watkins": OffOnDQN,
     "qrdqn": QRDQN,
+    "qrdqn_nstep": QRDQN,
 }
 
 # Former names (hyperparams/aliases.yml): each trains what its new name does and logs under the name it was given
@@ -81,6 +82,7 @@ ALGO_SUMMARIES: dict[str, str] = {
     "offon_mc_decay": "the search's first choice: coin flips, delta1 0.99 -> 0.01, no Sarsa",
     "offon_watkins": "lambda-returns, lambda 0.9, Watkins's Q(lambda)",
     "qrdqn": "sb3-contrib's QR-DQN, its loss from sorted targets (same results, faster)",
+    "qrdqn_nstep": "QR-DQN with n-step returns (sb3-contrib's n_steps, n in the YAML)",
     **{alias: f"former name of {name}" for alias, name in ALIASES.items()},
 }
 

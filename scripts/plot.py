@@ -81,6 +81,8 @@ COLORS = {
     "dqn": "tab:blue",
     "dqn_nstep": "tab:purple",
     "qrdqn": "tab:brown",
+    "qrdqn_nstep": "tab:gray",
+    "offon_qrdqn": "tab:olive",
     "offon_choice": "tab:pink",
     "offon_lambda": "tab:olive",
     "offon_lambda_choice": "tab:cyan",

@@ -35,6 +35,8 @@ LABELS = {
     "dqn": "DQN",
     "dqn_nstep": "n-step DQN",
     "qrdqn": "QR-DQN",
+    "qrdqn_nstep": "n-step QR-DQN",
+    "offon_qrdqn": "OffOnQRDQN",
     "offon_dqn": "OffOnDQN (defaults)",
     "offon_mc_decay": "Off-On DQN (search's choice)",
     "offon_watkins": "Off-On λ",

@@ -46,7 +46,14 @@ from run_stats import evaluation_curves, mean_ci
 from scipy import stats
 from study_file import MINMAX, Study
 
-COLORS = {"dqn": "tab:blue", "dqn_nstep": "tab:orange", "qrdqn": "tab:green", "offon_lambda_choice": "tab:red"}
+COLORS = {
+    "dqn": "tab:blue",
+    "dqn_nstep": "tab:orange",
+    "qrdqn": "tab:green",
+    "offon_lambda_choice": "tab:red",
+    "qrdqn_nstep": "tab:purple",
+    "offon_qrdqn": "tab:brown",
+}
 
 
 # ----------------------------------------------------------------------------------------------------------------------

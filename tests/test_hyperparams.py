@@ -25,7 +25,7 @@ register()
 
 PAPER_CLASSES = {"offon_paper": OffOnDQN, "dqn_mc": DQNMC, "dqn_sarsa": DQNSarsa, "dqn": DQN}
 # The head-to-heads' baselines (n-step DQN, QR-DQN) have entries for the four benchmark tasks only
-BASELINE_CLASSES = {"dqn_nstep": DQN, "qrdqn": QRDQN}
+BASELINE_CLASSES = {"dqn_nstep": DQN, "qrdqn": QRDQN, "qrdqn_nstep": QRDQN}
 # The configuration the search chose on tuning seeds 0-4: the four tasks and the search's stochastic one
 CHOICE_CLASSES = {"offon_mc_decay": OffOnDQN}
 # The lambda-return mode: OffOnDQN with mc_mixing="lambda" on the same tasks
@@ -36,7 +36,7 @@ CHOICE_ENVS = BASELINE_ENVS | {"FrozenLake-v1"}
 # The MinAtar games' entries (tests/test_minatar.py checks their values): in the files of the MinAtar head-to-head's
 # algorithms, and in offon_watkins.yml, which offon_dqn.yml repeats entry for entry
 MINATAR_ENVS = set(minatar_ids())
-MINATAR_FILES = {"dqn", "dqn_nstep", "qrdqn", "offon_paper", "offon_watkins", "offon_dqn"}
+MINATAR_FILES = {"dqn", "dqn_nstep", "qrdqn", "qrdqn_nstep", "offon_paper", "offon_watkins", "offon_dqn"}
 # The search's winner, `mc_sample` (results/search/README.md): the paper's delta1 schedule, no Sarsa, SB3's loss
 CHOICE_TARGETS = dict(
     mc_initial_prob=0.99,
@@ -111,6 +111,16 @@ def test_baselines_are_the_zoo_settings() -> None:
     zoo = load(Path(rl_zoo3.__file__).parent / "hyperparams" / "qrdqn.yml")
     ours = load(HYPERPARAMS_DIR / "qrdqn.yml")
     assert {env_id: ours[env_id] for env_id in BASELINE_ENVS} == {env_id: zoo[env_id] for env_id in BASELINE_ENVS}
+
+
+def test_nstep_qrdqn_is_qrdqn_with_the_n_of_nstep_dqn() -> None:
+    """Every qrdqn_nstep entry is the qrdqn entry, unchanged, plus the n_steps of dqn_nstep's entry for the same env."""
+    qrdqn, nstep_dqn = load(HYPERPARAMS_DIR / "qrdqn.yml"), load(HYPERPARAMS_DIR / "dqn_nstep.yml")
+    entries = load(HYPERPARAMS_DIR / "qrdqn_nstep.yml")
+    assert set(entries) == set(qrdqn)
+    for env_id, entry in entries.items():
+        assert {key: value for key, value in entry.items() if key != "n_steps"} == qrdqn[env_id], env_id
+        assert entry["n_steps"] == nstep_dqn[env_id]["n_steps"], env_id
 
 
 def test_nstep_entries_are_the_search_choice() -> None:
@@ -245,7 +255,7 @@ def build(algo: str, env_id: str, config: Path, log_folder: Path) -> tuple[Any, 
 @pytest.mark.parametrize("file_set, algo, entry", entries())
 def test_every_entry_builds_a_model(tmp_path: Path, file_set: str, algo: str, entry: str) -> None:
     if entry == "atari":
-        if algo == "qrdqn":
+        if algo in ("qrdqn", "qrdqn_nstep"):
             pytest.skip("the zoo's QR-DQN Atari entry keeps QRDQN's default 1M-frame buffer: 26 GiB to build")
         if not HAS_ALE:
             pytest.skip("ale-py is not installed")
