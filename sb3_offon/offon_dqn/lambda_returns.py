@@ -188,6 +188,95 @@ def choose_blocks(
     return picked // n_column_blocks, column_starts[picked % n_column_blocks], lengths[:n_picked]
 
 
+@dataclass
+class LambdaLayout:
+    """
+    The stored transitions of one refresh, laid out in blocks, and what their traces need of the buffer (everything but
+    the target network's values, which differ between a scalar and a distributional critic).
+
+    Arrays named ``padded`` are shaped (blocks, width), a block's transitions in chronological order from column 0;
+    the others hold the valid cells only, in the order of ``padded[valid]``.
+
+    :param valid: which cells of the padded layout hold a transition
+    :param slots: the transitions' slots in the replay buffer
+    :param envs: their env columns
+    :param added_at: their absolute add indices
+    :param inputs: :meth:`OffOnBufferMixin.lambda_inputs` of the transitions
+    :param stride: how far ahead a transition's trace goes on (the buffer's ``n_steps``)
+    :param goes_on: (padded) the trace of the transition can go on to the one ``stride`` steps later: its episode went
+        on past its window and that transition is in the block
+    :param no_value_after: no value follows the transition where its trace stops (a termination; with
+        ``cut_is_terminal``, a cut episode's end too)
+    :param whole_buffer: whether the blocks are every transition stored (each env's history one block)
+    """
+
+    valid: np.ndarray
+    slots: np.ndarray
+    envs: np.ndarray
+    added_at: np.ndarray
+    inputs: dict[str, Any]
+    stride: int
+    goes_on: np.ndarray
+    no_value_after: np.ndarray
+    whole_buffer: bool
+
+    def padded(self, values: np.ndarray, fill: float = 0.0) -> np.ndarray:
+        """``values`` (one per transition, with any trailing shape) in the padded layout, ``fill`` elsewhere."""
+        result = np.full((*self.valid.shape, *np.shape(values)[1:]), fill, dtype=np.result_type(values, fill))
+        result[self.valid] = values
+        return result
+
+    def trace(self, greedy_actions: np.ndarray, qlearning_prob: float) -> np.ndarray:
+        """(padded) c: 1 where the action recorded after the transition's window is the greedy one, else 1 - delta2."""
+        next_actions = self.inputs["next_actions"].reshape(-1)
+        return self.padded(np.where(greedy_actions == next_actions, 1.0, 1.0 - qlearning_prob), fill=1.0)
+
+    def trace_cut_fraction(self, trace: np.ndarray) -> float:
+        """The share of the continuations whose trace weight is below 1."""
+        n_goes_on = int(np.count_nonzero(self.goes_on))
+        return float(np.count_nonzero(self.goes_on & (trace < 1.0))) / n_goes_on if n_goes_on else 0.0
+
+
+def lambda_layout(
+    buffer: OffOnBufferMixin, n_wanted: int, block_size: int, gamma: float, cut_is_terminal: bool, env: Any = None
+) -> LambdaLayout:
+    """
+    About ``n_wanted`` stored transitions in blocks (:func:`choose_blocks`) and what their lambda-returns need of the
+    buffer. The parameters are those of :func:`compute_lambda_returns`.
+    """
+    oldest, n_stored, first = buffer.chronology()
+    block_envs, block_starts, block_lengths = choose_blocks(buffer.n_envs, first, n_stored, block_size, n_wanted)
+    width = int(block_lengths.max()) if len(block_lengths) else 0
+    steps = np.arange(width)
+    valid = steps < block_lengths[:, None]
+    chronological = block_starts[:, None] + steps
+    slots = ((oldest + chronological) % buffer.buffer_size)[valid]
+    envs = np.broadcast_to(block_envs[:, None], valid.shape)[valid]
+
+    inputs = buffer.lambda_inputs(slots, envs, gamma, env)
+    next_actions = inputs["next_actions"].reshape(-1)
+    # Where the trace goes on: the next transition (one-step buffer) or the one after the n-step window
+    stride = buffer.n_steps
+    goes_on = np.zeros(valid.shape, dtype=bool)
+    goes_on[valid] = next_actions >= 0
+    goes_on[:, :-stride] &= valid[:, stride:]
+    goes_on[:, -stride:] = False
+    no_value_after = inputs["terminated"]
+    if cut_is_terminal:
+        no_value_after = no_value_after | ((next_actions < 0) & ~inputs["running_newest"])
+    return LambdaLayout(
+        valid=valid,
+        slots=slots,
+        envs=envs,
+        added_at=buffer._n_adds - n_stored + chronological[valid],
+        inputs=inputs,
+        stride=stride,
+        goes_on=goes_on,
+        no_value_after=no_value_after,
+        whole_buffer=wants_whole_buffer(buffer.n_envs, first, n_stored, n_wanted),
+    )
+
+
 def compute_lambda_returns(
     buffer: OffOnBufferMixin,
     target_values: TargetValueFn,
@@ -216,54 +305,27 @@ def compute_lambda_returns(
     :param key: the refresh key to store
     :param env: the VecNormalize wrapper, if any, to normalise observations and rewards with
     """
-    oldest, n_stored, first = buffer.chronology()
-    block_envs, block_starts, block_lengths = choose_blocks(buffer.n_envs, first, n_stored, block_size, n_wanted)
-    width = int(block_lengths.max()) if len(block_lengths) else 0
-    steps = np.arange(width)
-    valid = steps < block_lengths[:, None]
-    chronological = block_starts[:, None] + steps
-    slots = ((oldest + chronological) % buffer.buffer_size)[valid]
-    envs = np.broadcast_to(block_envs[:, None], valid.shape)[valid]
-
-    inputs = buffer.lambda_inputs(slots, envs, gamma, env)
+    layout = lambda_layout(buffer, n_wanted, block_size, gamma, cut_is_terminal, env)
+    inputs, goes_on = layout.inputs, layout.goes_on
     next_values, greedy_actions = target_values(inputs["next_observations"])
-    next_actions = inputs["next_actions"].reshape(-1)
-    # Where the trace goes on: the next transition (one-step buffer) or the one after the n-step window
-    stride = buffer.n_steps
+    trace = layout.trace(greedy_actions, qlearning_prob)  # c_{t+1} (c_{t+n} with n-step windows)
+    tail = np.where(layout.no_value_after, 0.0, next_values)  # the value after a transition whose trace stops there
 
-    # In the blocks' padded layout: a transition's trace goes on to the one `stride` steps later if its episode went on
-    # past its window and that transition is in the block
-    goes_on = np.zeros(valid.shape, dtype=bool)
-    goes_on[valid] = next_actions >= 0
-    goes_on[:, :-stride] &= valid[:, stride:]
-    goes_on[:, -stride:] = False
-    trace = np.ones(valid.shape)  # c_{t+1} (c_{t+n} with n-step windows)
-    trace[valid] = np.where(greedy_actions == next_actions, 1.0, 1.0 - qlearning_prob)
-    no_value_after = inputs["terminated"]
-    if cut_is_terminal:
-        no_value_after = no_value_after | ((next_actions < 0) & ~inputs["running_newest"])
-    tail = np.where(no_value_after, 0.0, next_values)  # the value after a transition whose trace stops there
-
-    padded_values, padded_tail, rewards = np.zeros(valid.shape), np.zeros(valid.shape), np.zeros(valid.shape)
-    padded_values[valid], padded_tail[valid], rewards[valid] = next_values, tail, inputs["rewards"]
-    discounts = np.ones(valid.shape)  # gamma, or gamma^k over a window of k steps
-    discounts[valid] = inputs["discounts"]
+    padded_values, padded_tail = layout.padded(next_values.astype(np.float64)), layout.padded(tail)
+    rewards = layout.padded(inputs["rewards"].astype(np.float64))
+    discounts = layout.padded(inputs["discounts"], fill=1.0)  # gamma, or gamma^k over a window of k steps
     bootstrap = np.where(goes_on, (1.0 - lam * trace) * padded_values, padded_tail)
     returns = backward_recurrence(
-        rewards + discounts * bootstrap, np.where(goes_on, discounts * lam * trace, 0.0), stride=stride
+        rewards + discounts * bootstrap, np.where(goes_on, discounts * lam * trace, 0.0), stride=layout.stride
     )
-
-    n_goes_on = int(np.count_nonzero(goes_on))
-    trace_cut_fraction = float(np.count_nonzero(goes_on & (trace < 1.0))) / n_goes_on if n_goes_on else 0.0
-    added_at = buffer._n_adds - n_stored + chronological[valid]
     return LambdaReturnCache(
-        slots=slots,
-        envs=envs,
-        added_at=added_at,
-        returns=returns[valid].astype(np.float32),
+        slots=layout.slots,
+        envs=layout.envs,
+        added_at=layout.added_at,
+        returns=returns[layout.valid].astype(np.float32),
         key=key,
         lam=lam,
         qlearning_prob=qlearning_prob,
-        trace_cut_fraction=trace_cut_fraction,
-        whole_buffer=wants_whole_buffer(buffer.n_envs, first, n_stored, n_wanted),
+        trace_cut_fraction=layout.trace_cut_fraction(trace),
+        whole_buffer=layout.whole_buffer,
     )

@@ -1,7 +1,8 @@
 """
-OffOnDQN's training on lambda-returns (``mc_mixing="lambda"``): when to refresh the cached lambda-returns, how many to
-compute, the target network's pass over the next observations, and the gradient steps on the cached returns.
-The returns themselves are computed in :mod:`sb3_offon.offon_dqn.lambda_returns`.
+Training on cached lambda-returns: when to refresh them, how many to compute and which to train on
+(:class:`LambdaRefreshMixin`, shared by OffOnDQN's ``mc_mixing="lambda"`` and OffOnQRDQN), and OffOnDQN's own part
+(:class:`LambdaTrainingMixin`): the target network's pass over the next observations and the gradient steps on the
+cached returns. The returns themselves are computed in :mod:`sb3_offon.offon_dqn.lambda_returns`.
 """
 
 import math
@@ -27,7 +28,113 @@ LAMBDA_FORWARD_ROWS = 1024
 LAMBDA_FORWARD_BYTES = 8 * 2**20
 
 
-class LambdaTrainingMixin:
+class LambdaRefreshMixin:
+    """
+    When an algorithm that trains on cached lambda-returns refreshes them, how many it computes, and which cached
+    entries each training call draws: what :class:`sb3_offon.OffOnDQN` (``mc_mixing="lambda"``) and
+    :class:`sb3_offon.OffOnQRDQN` share. A subclass computes a cache in :meth:`_compute_lambda_cache`.
+    """
+
+    # Attributes and methods of the algorithm (SB3's DQN or sb3-contrib's QR-DQN), declared for type checkers
+    replay_buffer: ReplayBuffer | None
+    batch_size: int
+    gradient_steps: int
+    train_freq: Any  # a TrainFreq once the model is set up
+    n_envs: int
+    target_update_interval: int
+    num_timesteps: int
+    lambda_refresh_interval: int | None
+    device: th.device
+    _n_calls: int
+    _lambda_cache: LambdaReturnCache | None
+    _observation_bytes: Callable[[], int]
+
+    def _lambda_refresh_key(self) -> int:
+        """
+        Changes exactly when the cached lambda-returns are due: at each target network update (SB3's ``_on_step``
+        updates it every ``target_update_interval // n_envs`` calls), or every ``lambda_refresh_interval`` env steps.
+        """
+        if self.lambda_refresh_interval is not None:
+            return self.num_timesteps // self.lambda_refresh_interval
+        return self._n_calls // max(self.target_update_interval // self.n_envs, 1)
+
+    def _refreshed_lambda_cache(self, n_samples: int) -> LambdaReturnCache:
+        """
+        The cached lambda-returns, computed afresh if there are none yet, the refresh key changed, or the cache held the
+        whole buffer and the buffer has doubled since (a young buffer, with the same target network).
+        """
+        assert isinstance(self.replay_buffer, OffOnBufferMixin)
+        key = self._lambda_refresh_key()
+        cache = self._lambda_cache
+        if cache is not None and cache.key == key and not cache.outgrown(self.replay_buffer):
+            return cache
+        self._lambda_cache = self._compute_lambda_cache(max(n_samples, self._lambda_samples_per_refresh()), key)
+        return self._lambda_cache
+
+    def _compute_lambda_cache(self, n_wanted: int, key: int) -> LambdaReturnCache:
+        """The lambda-returns of about ``n_wanted`` stored transitions, with the target network of refresh ``key``."""
+        raise NotImplementedError
+
+    def _draw_lambda_entries(self, n_samples: int) -> tuple[LambdaReturnCache, np.ndarray]:
+        """
+        The cache (refreshed first if due) and ``n_samples`` of its entries to train on; computed afresh if everything
+        cached was overwritten since the refresh.
+        """
+        assert isinstance(self.replay_buffer, OffOnBufferMixin)
+        cache = self._refreshed_lambda_cache(n_samples)
+        entries = cache.draw(n_samples, self.replay_buffer)
+        if entries is None:  # everything cached was overwritten since the refresh: compute afresh
+            self._lambda_cache = None
+            cache = self._refreshed_lambda_cache(n_samples)
+            entries = cache.draw(n_samples, self.replay_buffer)
+            assert entries is not None
+        return cache, entries
+
+    def _lambda_samples_per_refresh(self) -> int:
+        """
+        How many transitions will be trained on from one refresh to the next (with ``train_freq`` in steps; in
+        episodes, this is unknown and one training call's count is used): each refresh computes about as many
+        lambda-returns, so that each is used about once.
+        """
+        if self.train_freq.unit != TrainFrequencyUnit.STEP:
+            return 0
+        steps_per_call = self.train_freq.frequency * self.n_envs
+        if self.lambda_refresh_interval is not None:
+            steps_per_refresh = self.lambda_refresh_interval
+        else:
+            steps_per_refresh = max(self.target_update_interval // self.n_envs, 1) * self.n_envs
+        calls_per_refresh = max(1, math.ceil(steps_per_refresh / steps_per_call))
+        gradient_steps = self.gradient_steps if self.gradient_steps >= 0 else steps_per_call
+        return calls_per_refresh * gradient_steps * self.batch_size
+
+    def _forward_in_chunks(self, observations: Any, forward: Callable[[Any], tuple[th.Tensor, ...]]) -> list[th.Tensor]:
+        """
+        ``forward`` (the target network's pass, under ``no_grad``) over a batch of (normalised) observations in the
+        buffer's layout, in chunks of :meth:`_lambda_forward_rows` rows; each of its outputs concatenated over the chunks,
+        left on the device (empty list for no observations).
+        """
+        first = next(iter(observations.values())) if isinstance(observations, dict) else observations
+        rows_per_chunk = self._lambda_forward_rows()
+        outputs: list[tuple[th.Tensor, ...]] = []
+        with th.no_grad():
+            for start in range(0, len(first), rows_per_chunk):
+                rows = slice(start, start + rows_per_chunk)
+                outputs.append(forward(obs_as_tensor(rows_of(observations, rows), self.device)))
+        return [th.cat(parts) for parts in zip(*outputs, strict=True)]
+
+    def _lambda_forward_rows(self) -> int:
+        """
+        How many next observations the refresh runs through the target network at once: at most
+        ``LAMBDA_FORWARD_ROWS``, and at most ``LAMBDA_FORWARD_BYTES`` of float32 observations.
+
+        Larger chunks are slower on a CPU once their activations leave the cache: 32,000 rows through a 256-256 MLP at
+        once took 1.5x as long as in chunks of 1,024; NatureCNN on 4x84x84 frames (one thread) took 247 us a row in
+        chunks of 594 (64 MiB of floats) and 177-188 us in chunks of 48-128 (the bytes bound gives 74).
+        """
+        return max(1, min(LAMBDA_FORWARD_ROWS, LAMBDA_FORWARD_BYTES // max(self._observation_bytes(), 1)))
+
+
+class LambdaTrainingMixin(LambdaRefreshMixin):
     """
     The lambda-return training of :class:`sb3_offon.OffOnDQN`, kept apart from its coin-flip targets (see
     ``mc_mixing="lambda"`` in OffOnDQN's docstring for what is computed, how often, and at what cost).
@@ -77,14 +184,7 @@ class LambdaTrainingMixin:
         self.policy.set_training_mode(True)
         self._update_learning_rate(self.policy.optimizer)
         loss_fn = self._loss_fn()
-        n_samples = gradient_steps * batch_size
-        cache = self._refreshed_lambda_cache(n_samples)
-        entries = cache.draw(n_samples, self.replay_buffer)
-        if entries is None:  # everything cached was overwritten since the refresh: compute afresh
-            self._lambda_cache = None
-            cache = self._refreshed_lambda_cache(n_samples)
-            entries = cache.draw(n_samples, self.replay_buffer)
-            assert entries is not None
+        cache, entries = self._draw_lambda_entries(gradient_steps * batch_size)
         parameters = self._parameter_list()
         losses = []
         steps_per_chunk = self._steps_per_chunk(batch_size)
@@ -115,29 +215,13 @@ class LambdaTrainingMixin:
         self.logger.record("train/lambda", cache.lam)
         self.logger.record("train/trace_cut_fraction", cache.trace_cut_fraction)
 
-    def _lambda_refresh_key(self) -> int:
-        """
-        Changes exactly when the cached lambda-returns are due: at each target network update (SB3's ``_on_step``
-        updates it every ``target_update_interval // n_envs`` calls), or every ``lambda_refresh_interval`` env steps.
-        """
-        if self.lambda_refresh_interval is not None:
-            return self.num_timesteps // self.lambda_refresh_interval
-        return self._n_calls // max(self.target_update_interval // self.n_envs, 1)
-
-    def _refreshed_lambda_cache(self, n_samples: int) -> LambdaReturnCache:
-        """
-        The cached lambda-returns, computed afresh if there are none yet, the refresh key changed, or the cache held the
-        whole buffer and the buffer has doubled since (a young buffer, with the same target network).
-        """
+    def _compute_lambda_cache(self, n_wanted: int, key: int) -> LambdaReturnCache:
+        """The lambda-returns of about ``n_wanted`` stored transitions, with the target network of refresh ``key``."""
         assert isinstance(self.replay_buffer, OffOnBufferMixin)
-        key = self._lambda_refresh_key()
-        cache = self._lambda_cache
-        if cache is not None and cache.key == key and not cache.outgrown(self.replay_buffer):
-            return cache
-        self._lambda_cache = compute_lambda_returns(
+        return compute_lambda_returns(
             self.replay_buffer,
             self._target_values_and_actions,
-            n_wanted=max(n_samples, self._lambda_samples_per_refresh()),
+            n_wanted=n_wanted,
             block_size=self.lambda_block_size,
             gamma=self.gamma,
             lam=self.mc_prob,
@@ -146,24 +230,6 @@ class LambdaTrainingMixin:
             key=key,
             env=self._vec_normalize_env,
         )
-        return self._lambda_cache
-
-    def _lambda_samples_per_refresh(self) -> int:
-        """
-        How many transitions will be trained on from one refresh to the next (with ``train_freq`` in steps; in
-        episodes, this is unknown and one training call's count is used): each refresh computes about as many
-        lambda-returns, so that each is used about once.
-        """
-        if self.train_freq.unit != TrainFrequencyUnit.STEP:
-            return 0
-        steps_per_call = self.train_freq.frequency * self.n_envs
-        if self.lambda_refresh_interval is not None:
-            steps_per_refresh = self.lambda_refresh_interval
-        else:
-            steps_per_refresh = max(self.target_update_interval // self.n_envs, 1) * self.n_envs
-        calls_per_refresh = max(1, math.ceil(steps_per_refresh / steps_per_call))
-        gradient_steps = self.gradient_steps if self.gradient_steps >= 0 else steps_per_call
-        return calls_per_refresh * gradient_steps * self.batch_size
 
     def _target_values_and_actions(self, observations: np.ndarray | dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         """
@@ -171,29 +237,10 @@ class LambdaTrainingMixin:
         :meth:`_lambda_forward_rows` rows, read back to the host once: max_a Q_target(s, a) and its argmax, or, with
         ``double_q``, Q_target(s, a*) and a* = argmax_a Q(s, a) of the online network (its pass on the same chunk).
         """
-        first = next(iter(observations.values())) if isinstance(observations, dict) else observations
-        n_observations = len(first)
-        rows_per_chunk = self._lambda_forward_rows()
-        values, actions = [], []
-        with th.no_grad():
-            for start in range(0, n_observations, rows_per_chunk):
-                rows = slice(start, start + rows_per_chunk)
-                _, chunk_actions, chunk_values = self._bootstrap(obs_as_tensor(rows_of(observations, rows), self.device))
-                values.append(chunk_values)
-                actions.append(chunk_actions)
-        if not values:
+        outputs = self._forward_in_chunks(observations, lambda obs: self._bootstrap(obs)[2:0:-1])
+        if not outputs:
             return np.zeros(0, dtype=np.float32), np.zeros(0, dtype=np.int64)
+        values, actions = outputs
         # One read-back for both (an action index is exact in float32 up to 2**24 actions)
-        both = th.stack([th.cat(values), th.cat(actions).to(values[0].dtype)]).cpu().numpy()
+        both = th.stack([values, actions.to(values.dtype)]).cpu().numpy()
         return both[0], both[1].astype(np.int64)
-
-    def _lambda_forward_rows(self) -> int:
-        """
-        How many next observations the refresh runs through the target network at once: at most
-        ``LAMBDA_FORWARD_ROWS``, and at most ``LAMBDA_FORWARD_BYTES`` of float32 observations.
-
-        Larger chunks are slower on a CPU once their activations leave the cache: 32,000 rows through a 256-256 MLP at
-        once took 1.5x as long as in chunks of 1,024; NatureCNN on 4x84x84 frames (one thread) took 247 us a row in
-        chunks of 594 (64 MiB of floats) and 177-188 us in chunks of 48-128 (the bytes bound gives 74).
-        """
-        return max(1, min(LAMBDA_FORWARD_ROWS, LAMBDA_FORWARD_BYTES // max(self._observation_bytes(), 1)))

@@ -5,7 +5,6 @@ from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 import torch as th
-from gymnasium import spaces
 from stable_baselines3.common.buffers import ReplayBuffer
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
@@ -16,11 +15,9 @@ from torch.nn import functional as F
 
 from sb3_offon.common.buffers import (
     OffOnBufferMixin,
-    OffOnDictReplayBuffer,
-    OffOnNStepReplayBuffer,
-    OffOnReplayBuffer,
     reward_scale,
 )
+from sb3_offon.common.offon_model import OffOnReplayMixin
 from sb3_offon.offon_dqn.chunks import ChunkedMinibatchesMixin
 from sb3_offon.offon_dqn.coin_flip_targets import CoinFlipTargetsMixin
 from sb3_offon.offon_dqn.lambda_returns import LambdaReturnCache
@@ -63,7 +60,7 @@ def _real_number(name: str, value: Any) -> float:
     return float(value)
 
 
-class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, ChunkedMinibatchesMixin, DQN):
+class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, DQN):
     """
     Offline-Online DQN: a DQN whose regression target is drawn, per sample, among the offline Monte-Carlo return
     of the finished episode, the Q-learning target and the Sarsa target.
@@ -377,24 +374,7 @@ class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, ChunkedMinibatchesMixi
 
     def _setup_model(self) -> None:
         self._check_offon_arguments()
-        if self.replay_buffer_class is None:
-            self.replay_buffer_class = self._default_replay_buffer_class()
-        # The model's gamma and n_steps are passed at each setup and not saved in replay_buffer_kwargs, so that a
-        # model loaded with another gamma or n_steps builds its buffer with them (models saved before kept them there)
-        user_kwargs = self.replay_buffer_kwargs
-        self.replay_buffer_kwargs = {**user_kwargs, **self._buffer_discounting(self.replay_buffer_class, user_kwargs)}
-
-        # SB3's setup calls set_random_seed(self.seed): keep the draws' generator as it is (a loaded model draws on)
-        target_rng = self.target_rng
-        try:
-            with warnings.catch_warnings():
-                if issubclass(self.replay_buffer_class, OffOnNStepReplayBuffer):  # type: ignore[arg-type]
-                    # n_steps is passed on to our n-step buffer: SB3's warning that it is ignored does not apply
-                    warnings.filterwarnings("ignore", message="`n_steps=.*is ignored")
-                super()._setup_model()
-        finally:
-            self.replay_buffer_kwargs = user_kwargs
-        self.target_rng = target_rng
+        self._setup_model_with_offon_buffer()
 
         self.mc_schedule = LinearSchedule(self.mc_initial_prob, self.mc_final_prob, self.mc_fraction)
         self.qlearning_schedule = LinearSchedule(
@@ -403,36 +383,6 @@ class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, ChunkedMinibatchesMixi
         self._connect_replay_buffer()
         # Never pickled (see _excluded_save_params): a loaded model computes its lambda-returns afresh
         self._lambda_cache: LambdaReturnCache | None = None
-
-    def _default_replay_buffer_class(self) -> type[ReplayBuffer]:
-        """The Off-On buffer for the observation space and ``n_steps`` (as SB3's DQN picks among its own)."""
-        if isinstance(self.observation_space, spaces.Dict):
-            if self.n_steps > 1:
-                raise ValueError("`n_steps` > 1 is not supported for Dict observation spaces (as in SB3's DQN)")
-            return OffOnDictReplayBuffer
-        return OffOnNStepReplayBuffer if self.n_steps > 1 else OffOnReplayBuffer
-
-    def _buffer_discounting(self, buffer_class: type[ReplayBuffer], buffer_kwargs: dict[str, Any]) -> dict[str, Any]:
-        """The model's ``gamma`` and ``n_steps`` for an Off-On buffer (nothing for another buffer class)."""
-        if not issubclass(buffer_class, OffOnBufferMixin):
-            return {}
-        discounting: dict[str, Any] = {"gamma": self.gamma}
-        # SB3's way to ask a custom buffer for n-step returns, replay_buffer_kwargs={"n_steps": n}, still works
-        if issubclass(buffer_class, OffOnNStepReplayBuffer) and (self.n_steps > 1 or "n_steps" not in buffer_kwargs):
-            discounting["n_steps"] = self.n_steps
-        return discounting
-
-    def _check_buffer_discounting(self) -> None:
-        # Not in _setup_model: a model saved before this check may hold its old values there, which setup replaces
-        if not {"gamma", "n_steps"} & set(self.replay_buffer_kwargs):
-            return  # (load() builds the model without an env: no observation space to pick a buffer class by)
-        buffer_class = self.replay_buffer_class or self._default_replay_buffer_class()
-        for key, value in self._buffer_discounting(buffer_class, self.replay_buffer_kwargs).items():
-            if key in self.replay_buffer_kwargs and self.replay_buffer_kwargs[key] != value:
-                raise ValueError(
-                    f"`replay_buffer_kwargs['{key}']` ({self.replay_buffer_kwargs[key]!r}) differs from the model's "
-                    f"`{key}` ({value!r}): an Off-On buffer discounts returns and TD targets with the model's"
-                )
 
     def _connect_replay_buffer(self) -> None:
         if isinstance(self.replay_buffer, OffOnBufferMixin):
@@ -450,37 +400,6 @@ class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, ChunkedMinibatchesMixi
                 f"OffOnDQN: {type(self.replay_buffer).__name__} records no Monte-Carlo returns nor next actions; "
                 "training uses Q-learning targets only (plain DQN). Use an OffOnReplayBuffer for the Off-On targets."
             )
-
-    def load_replay_buffer(self, path: Any, truncate_last_traj: bool = True) -> None:
-        """
-        Load a replay buffer from a pickle file, and connect an Off-On buffer to this model.
-
-        :param path: Path to the pickled replay buffer.
-        :param truncate_last_traj: As for SB3's ``HerReplayBuffer``: if ``True``, the buffer's running episodes were
-            cut off (each ends as a time-limit truncation, per ``mc_truncation``); if ``False``, they go on with this
-            model's current env episodes (a buffer saved by this same live model, with no env reset in between).
-        """
-        previous_buffer = self.replay_buffer
-        super().load_replay_buffer(path, truncate_last_traj)
-        if isinstance(self.replay_buffer, OffOnBufferMixin):
-            # Its stored returns and its n-step windows were made with its own discounting: mixing them with this
-            # model's targets would train on two discounts at once
-            # (n_steps: the model's, or the buffer kwargs' where the model's is 1, as _buffer_discounting builds it)
-            expected = {"gamma": self.gamma, "n_steps": self.n_steps}
-            if self.n_steps == 1:
-                expected["n_steps"] = self.replay_buffer_kwargs.get("n_steps", 1)
-            for key, value in expected.items():
-                loaded = getattr(self.replay_buffer, key)
-                if loaded != value:
-                    self.replay_buffer = previous_buffer
-                    raise ValueError(
-                        f"The loaded replay buffer's `{key}` ({loaded!r}) differs from the model's ({value!r}): an Off-On "
-                        "buffer's returns and n-step windows are made with the model's discounting"
-                    )
-        self._lambda_cache = None  # its slots were of the buffer it replaces
-        self._connect_replay_buffer()
-        if truncate_last_traj and isinstance(self.replay_buffer, OffOnBufferMixin):
-            self.replay_buffer.end_open_episodes()
 
     def _online_greedy_actions(self, observations: th.Tensor | dict[str, th.Tensor]) -> th.Tensor:
         """
@@ -531,32 +450,6 @@ class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, ChunkedMinibatchesMixi
             values = self._bootstrap(obs_tensor)[2].cpu().numpy()
         # Q is in the units of the (maybe normalised) rewards it learnt from, the buffer's returns in raw units
         return values * reward_scale(self._vec_normalize_env)
-
-    def set_random_seed(self, seed: int | None = None) -> None:
-        """
-        Seed the global RNGs, the action space and the env as SB3 does, and the target draws' own generator.
-
-        :param seed: the seed (None: leave everything as it is, as SB3 does)
-        """
-        super().set_random_seed(seed)
-        if seed is not None:
-            self.target_rng = np.random.default_rng(seed)
-
-    def _setup_learn(
-        self,
-        total_timesteps: int,
-        callback: MaybeCallback = None,
-        reset_num_timesteps: bool = True,
-        tb_log_name: str = "run",
-        progress_bar: bool = False,
-    ) -> Any:
-        env_resets = reset_num_timesteps or self._last_obs is None
-        result = super()._setup_learn(total_timesteps, callback, reset_num_timesteps, tb_log_name, progress_bar)
-        if env_resets and isinstance(self.replay_buffer, OffOnBufferMixin):
-            # Episodes still running in the buffer were cut off by this reset
-            self.replay_buffer.end_open_episodes()
-            self._lambda_cache = None  # their last transitions' returns are no longer those of running episodes
-        return result
 
     def train(self, gradient_steps: int, batch_size: int = 100) -> None:
         """
