@@ -14,6 +14,7 @@ from sb3_offon.common.buffers import (
     OffOnReplayBufferSamples,
 )
 from sb3_offon.offon_dqn import CnnPolicy, MlpPolicy, MultiInputPolicy, OffOnDQN
+from sb3_offon.offon_qrdqn import OffOnQRDQN
 from sb3_offon.presets import LAMBDA_CHOICE_TARGETS, PAPER_TARGETS
 from sb3_offon.torch_layers import MinAtarCNN
 from sb3_offon.variants import DQNMC, DQNSarsa
@@ -34,6 +35,7 @@ __all__ = [
     "OffOnDictReplayBuffer",
     "OffOnDictReplayBufferSamples",
     "OffOnNStepReplayBuffer",
+    "OffOnQRDQN",
     "OffOnReplayBuffer",
     "OffOnReplayBufferSamples",
 ]

@@ -25,7 +25,8 @@ import rl_zoo3.enjoy as zoo_enjoy
 import rl_zoo3.train as zoo_train
 from rl_zoo3.utils import StoreDict
 
-from sb3_offon.offon_dqn.offon_dqn import LOSS_FUNCTIONS, MC_MIXING_OPTIONS, MC_TRUNCATION_OPTIONS, SARSA_TARGET_OPTIONS
+from sb3_offon.common.offon_model import MC_TRUNCATION_OPTIONS
+from sb3_offon.offon_dqn.offon_dqn import LOSS_FUNCTIONS, MC_MIXING_OPTIONS, SARSA_TARGET_OPTIONS
 
 # The string-valued options of OffOnDQN and its variants, and their choices. "max" is also a Python builtin: without
 # this table ``mc_mixing:max`` would evaluate to the function

@@ -38,8 +38,9 @@ from stable_baselines3.common.callbacks import EvalCallback
 
 # Registers CartPoleFallPenalty-v1 and MountainCarGoalBonus-v0 (also done by ``import sb3_offon``)
 import sb3_offon.envs  # noqa: F401
+from sb3_offon.common.offon_model import MC_TRUNCATION_OPTIONS
 from sb3_offon.offon_dqn import OffOnDQN
-from sb3_offon.offon_dqn.offon_dqn import LOSS_FUNCTIONS, MC_MIXING_OPTIONS, MC_TRUNCATION_OPTIONS, SARSA_TARGET_OPTIONS
+from sb3_offon.offon_dqn.offon_dqn import LOSS_FUNCTIONS, MC_MIXING_OPTIONS, SARSA_TARGET_OPTIONS
 from sb3_offon.qrdqn import QRDQN
 from sb3_offon.resume import STOPPED_FILE, Checkpoint, RunCheckpoint, joined_monitor
 from sb3_offon.torch_layers import MinAtarCNN

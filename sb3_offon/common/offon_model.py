@@ -6,6 +6,8 @@ draws. :class:`sb3_offon.OffOnDQN` and :class:`sb3_offon.OffOnQRDQN` share it; i
 class (SB3's ``DQN``, sb3-contrib's ``QRDQN``) in their bases.
 """
 
+import math
+import numbers
 import warnings
 from typing import Any
 
@@ -20,6 +22,54 @@ from sb3_offon.common.buffers import (
     OffOnNStepReplayBuffer,
     OffOnReplayBuffer,
 )
+
+MC_TRUNCATION_OPTIONS = ("bootstrap", "terminal", "drop")
+
+
+def real_number(name: str, value: Any) -> float:
+    """
+    ``value`` as a float, if it is a real number: not a string ("0.5"), None, NaN or a bool (``True`` would pass as 1).
+
+    :raises ValueError: naming the parameter, otherwise the comparisons that follow raise a ``TypeError`` (a string)
+        or pass silently (NaN, bools)
+    """
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real) or math.isnan(value):
+        raise ValueError(f"`{name}` must be a real number, got {value!r} ({type(value).__name__})")
+    return float(value)
+
+
+def check_option(name: str, value: Any, options: tuple[str, ...]) -> None:
+    """:raises ValueError: naming the parameter, unless ``value`` is one of the strings ``options``."""
+    # isinstance first: an array or other object would make ``in`` ambiguous or raise something else
+    if not isinstance(value, str) or value not in options:
+        raise ValueError(f"`{name}` must be one of {options}, got {value!r}")
+
+
+def check_lambda_arguments(model: Any) -> None:
+    """
+    Check the arguments that OffOnDQN and OffOnQRDQN share: the delta1 and delta2 schedules, ``mc_truncation``,
+    ``double_q``, ``lambda_block_size`` and ``lambda_refresh_interval``.
+
+    :raises ValueError: naming the first bad parameter
+    """
+    for name in ("mc_initial_prob", "mc_final_prob", "qlearning_initial_prob", "qlearning_final_prob"):
+        value = real_number(name, getattr(model, name))
+        if not 0.0 <= value <= 1.0:
+            raise ValueError(f"`{name}` must be a probability in [0, 1], got {value!r}")
+    for name in ("mc_fraction", "qlearning_fraction"):
+        value = real_number(name, getattr(model, name))
+        if not 0.0 < value <= 1.0:
+            raise ValueError(f"`{name}` must be in (0, 1], got {value!r}")
+    check_option("mc_truncation", model.mc_truncation, MC_TRUNCATION_OPTIONS)
+    # getattr: models saved before double_q existed load without it (and train as before, without double Q)
+    if not isinstance(getattr(model, "double_q", False), (bool, np.bool_)):
+        raise ValueError(f"`double_q` must be True or False, got {model.double_q!r}")
+    for name, allow_none in (("lambda_block_size", False), ("lambda_refresh_interval", True)):
+        value = getattr(model, name)
+        if allow_none and value is None:
+            continue
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral) or value < 1:
+            raise ValueError(f"`{name}` must be a positive integer{' or None' if allow_none else ''}, got {value!r}")
 
 
 class OffOnReplayMixin:

@@ -1,5 +1,3 @@
-import math
-import numbers
 import warnings
 from typing import Any, ClassVar, TypeVar
 
@@ -17,7 +15,7 @@ from sb3_offon.common.buffers import (
     OffOnBufferMixin,
     reward_scale,
 )
-from sb3_offon.common.offon_model import OffOnReplayMixin
+from sb3_offon.common.offon_model import OffOnReplayMixin, check_lambda_arguments, check_option
 from sb3_offon.offon_dqn.chunks import ChunkedMinibatchesMixin
 from sb3_offon.offon_dqn.coin_flip_targets import CoinFlipTargetsMixin
 from sb3_offon.offon_dqn.lambda_returns import LambdaReturnCache
@@ -28,7 +26,6 @@ SelfOffOnDQN = TypeVar("SelfOffOnDQN", bound="OffOnDQN")
 
 MC_MIXING_OPTIONS = ("sample", "convex", "max", "lambda")
 SARSA_TARGET_OPTIONS = ("sampled", "expected")
-MC_TRUNCATION_OPTIONS = ("bootstrap", "terminal", "drop")
 LOSS_FUNCTIONS = {"huber": F.smooth_l1_loss, "mse": F.mse_loss}
 # The constructor arguments OffOnDQN adds to DQN's
 OFFON_PARAMETERS = (
@@ -46,18 +43,6 @@ OFFON_PARAMETERS = (
     "lambda_refresh_interval",
     "double_q",
 )
-
-
-def _real_number(name: str, value: Any) -> float:
-    """
-    ``value`` as a float, if it is a real number: not a string ("0.5"), None, NaN or a bool (``True`` would pass as 1).
-
-    :raises ValueError: naming the parameter, otherwise the comparisons that follow raise a ``TypeError`` (a string)
-        or pass silently (NaN, bools)
-    """
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real) or math.isnan(value):
-        raise ValueError(f"`{name}` must be a real number, got {value!r} ({type(value).__name__})")
-    return float(value)
 
 
 class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, DQN):
@@ -344,33 +329,13 @@ class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, ChunkedMinibatchesMixi
 
     def _check_offon_arguments(self) -> None:
         # Run by _setup_model rather than __init__: load()'s kwargs and custom_objects reach the model without __init__
-        for name in ("mc_initial_prob", "mc_final_prob", "qlearning_initial_prob", "qlearning_final_prob"):
-            value = _real_number(name, getattr(self, name))
-            if not 0.0 <= value <= 1.0:
-                raise ValueError(f"`{name}` must be a probability in [0, 1], got {value!r}")
-        for name in ("mc_fraction", "qlearning_fraction"):
-            value = _real_number(name, getattr(self, name))
-            if not 0.0 < value <= 1.0:
-                raise ValueError(f"`{name}` must be in (0, 1], got {value!r}")
+        check_lambda_arguments(self)
         for name, options in (
             ("mc_mixing", MC_MIXING_OPTIONS),
             ("sarsa_target", SARSA_TARGET_OPTIONS),
-            ("mc_truncation", MC_TRUNCATION_OPTIONS),
             ("loss", tuple(LOSS_FUNCTIONS)),
         ):
-            value = getattr(self, name)
-            # isinstance first: an array or other object would make ``in`` ambiguous or raise something else
-            if not isinstance(value, str) or value not in options:
-                raise ValueError(f"`{name}` must be one of {options}, got {value!r}")
-        # getattr: models saved before double_q existed load without it (and train as before, without double Q)
-        if not isinstance(getattr(self, "double_q", False), (bool, np.bool_)):
-            raise ValueError(f"`double_q` must be True or False, got {self.double_q!r}")
-        for name, allow_none in (("lambda_block_size", False), ("lambda_refresh_interval", True)):
-            value = getattr(self, name)
-            if allow_none and value is None:
-                continue
-            if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral) or value < 1:
-                raise ValueError(f"`{name}` must be a positive integer{' or None' if allow_none else ''}, got {value!r}")
+            check_option(name, getattr(self, name), options)
 
     def _setup_model(self) -> None:
         self._check_offon_arguments()

@@ -1,0 +1,3 @@
+from sb3_offon.offon_qrdqn.offon_qrdqn import OffOnQRDQN
+
+__all__ = ["OffOnQRDQN"]

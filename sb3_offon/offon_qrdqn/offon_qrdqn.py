@@ -1,0 +1,377 @@
+from typing import Any, ClassVar, TypeVar
+
+import numpy as np
+import torch as th
+from sb3_contrib.qrdqn.policies import CnnPolicy, MlpPolicy, MultiInputPolicy, QRDQNPolicy
+from stable_baselines3.common.buffers import ReplayBuffer
+from stable_baselines3.common.policies import BasePolicy
+from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
+from stable_baselines3.common.utils import LinearSchedule, obs_as_tensor
+
+from sb3_offon.common.buffers import OffOnBufferMixin
+from sb3_offon.common.offon_model import OffOnReplayMixin, check_lambda_arguments, check_option
+from sb3_offon.common.quantile_loss import quantile_huber_loss
+from sb3_offon.offon_dqn.chunks import ChunkedMinibatchesMixin, rows_of
+from sb3_offon.offon_dqn.lambda_returns import LambdaReturnCache
+from sb3_offon.offon_dqn.lambda_training import LambdaRefreshMixin
+from sb3_offon.offon_qrdqn.quantile_lambda_returns import LAMBDA_FORMS, compute_quantile_lambda_returns
+from sb3_offon.qrdqn import QRDQN
+
+SelfOffOnQRDQN = TypeVar("SelfOffOnQRDQN", bound="OffOnQRDQN")
+
+# OffOnDQN's target modes, of which OffOnQRDQN has the lambda-returns only; and its losses, of which the quantile critic
+# has the (quantile) Huber loss only
+SUPPORTED_MC_MIXING = ("lambda",)
+SUPPORTED_LOSSES = ("huber",)
+
+
+class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, QRDQN):
+    """
+    Off-On QR-DQN: QR-DQN's quantile critic trained towards distributional lambda-returns from the replayed episodes,
+    computed as OffOnDQN's lambda-returns are (its default ``mc_mixing="lambda"``), with the target network's quantiles
+    in place of its values.
+
+    Paper: Kim, "Deep Reinforcement Learning by Balancing Offline Monte Carlo and Online Temporal Difference Use Based
+    on Environment Experiences", Symmetry 12(10):1685, 2020, https://doi.org/10.3390/sym12101685 (delta1 and delta2,
+    read as weights); Dabney et al., "Distributional Reinforcement Learning with Quantile Regression", AAAI 2018,
+    https://arxiv.org/abs/1710.10044 (the critic); Daley & Amato, "Reconciling lambda-Returns with Experience Replay",
+    NeurIPS 2019 (the cached returns).
+
+    A drop-in for :class:`sb3_offon.qrdqn.QRDQN` (sb3-contrib's QR-DQN with a faster loss): its policies, arguments and
+    defaults, plus OffOnDQN's lambda-mode arguments with OffOnDQN's names and defaults (lambda = delta1 = 0.9, Peng's
+    Q(lambda) with delta2 = 0), so that moving between OffOnDQN and OffOnQRDQN changes one word.
+
+    The target of a transition t is the law of its lambda-return: the mixture over horizons k of the k-step laws
+    r_t + ... + gamma^(k-1) r_(t+k-1) + gamma^k Z(s_(t+k), a*), with weights (1 - lam) lam^(k-1), the trace cut after
+    non-greedy actions by the delta2 weight exactly as in OffOnDQN (greedy: the argmax of the quantiles' mean, the
+    target network's, or the online network's with ``double_q``); a terminated episode's remaining weight on the Dirac
+    at its Monte-Carlo return; a truncated one's on Z(s_T) (``mc_truncation`` ``"bootstrap"`` and ``"drop"``) or on 0
+    (``"terminal"``); n-step windows as in OffOnDQN (``n_steps``). Equivalently, the backward recursion
+    Z^lam_t = r_t + gamma [(1 - lam c) Z(s_(t+1)) (+) lam c Z^lam_(t+1)]. lambda = 0 gives QR-DQN's own target (n-step
+    QR-DQN's with ``n_steps``), lambda = 1 without cuts a terminated episode's Monte-Carlo return.
+
+    The cache holds N target atoms per computed return (N = ``n_quantiles``), computed at each refresh from one batched
+    pass of the target network, as DQN(lambda) does, and the minibatches are drawn from it; the refresh, its blocks
+    and the minibatches are OffOnDQN's (see ``mc_mixing="lambda"`` there): no target network pass per gradient step.
+    ``lambda_form`` says how the law becomes N atoms (:mod:`sb3_offon.offon_qrdqn.quantile_lambda_returns`):
+
+    - ``"sampled"`` (default): a horizon is drawn per transition at each refresh from the weights above, and the target
+      is that horizon's k-step law; the quantile loss being linear in the target law, this is an unbiased draw of the
+      mixture's loss, with no projection, at the cost of vectorised NumPy work only;
+    - ``"projected"``: the backward recursion, each mixture of 2N weighted atoms projected back onto N atoms (the
+      mixture's quantiles at tau_i = (2i - 1) / 2N, the W1 projection); deterministic, but projecting projected laws,
+      and a loop over each block's steps.
+
+    The default is the sampled form: it is exact in expectation and cheaper; the projected form is kept as an option
+    (it costs one function) for comparison. (A setup check on tuning seeds, with its rule written before its runs,
+    compares the two: ``results/qr_lambda_form/README.md``.)
+
+    What OffOnQRDQN does not have: OffOnDQN's coin-flip modes (``mc_mixing`` other than ``"lambda"``) and the squared
+    error (``loss="mse"``), each a ``ValueError``; ``sarsa_target`` is accepted and plays no part, as in OffOnDQN's
+    lambda mode. The buffer is an Off-On buffer (its episode bookkeeping and recorded next actions are what the trace
+    needs); another ``replay_buffer_class`` is a ``ValueError``. Unlike OffOnDQN's, its Monte-Carlo returns are not
+    bootstrapped when an episode is cut (the lambda-returns never read them): ``mc_truncation`` acts at the refresh.
+
+    :param policy: The policy model to use (MlpPolicy, CnnPolicy, ...)
+    :param env: The environment to learn from (if registered in Gym, can be str)
+    :param learning_rate: The learning rate, it can be a function of the current progress remaining (from 1 to 0)
+    :param buffer_size: size of the replay buffer
+    :param learning_starts: how many steps of the model to collect transitions for before learning starts
+    :param batch_size: Minibatch size for each gradient update
+    :param tau: the soft update coefficient ("Polyak update", between 0 and 1) default 1 for hard update
+    :param gamma: the discount factor
+    :param train_freq: Update the model every ``train_freq`` steps. Alternatively pass a tuple of frequency and unit
+        like ``(5, "step")`` or ``(2, "episode")``.
+    :param gradient_steps: How many gradient steps to do after each rollout (see ``train_freq`` and ``n_episodes_rollout``)
+        Set to ``-1`` means to do as many gradient steps as steps done in the environment during the rollout.
+    :param replay_buffer_class: Replay buffer class to use: an Off-On buffer (None: the one matching the observation
+        space and ``n_steps``)
+    :param replay_buffer_kwargs: Keyword arguments to pass to the replay buffer on creation (``gamma`` and ``n_steps`` are
+        the model's, as in OffOnDQN)
+    :param optimize_memory_usage: Enable a memory efficient variant of the replay buffer at a cost of more complexity
+        (as in OffOnDQN: a time-limit truncation is then taken for a termination)
+    :param n_steps: the steps of the lambda-return are n-step windows (lambda = 0: n-step QR-DQN's target)
+    :param target_update_interval: update the target network every ``target_update_interval`` environment steps.
+    :param exploration_fraction: fraction of entire training period over which the exploration rate is reduced
+    :param exploration_initial_eps: initial value of random action probability
+    :param exploration_final_eps: final value of random action probability
+    :param max_grad_norm: The maximum value for the gradient clipping (if None, no clipping)
+    :param mc_initial_prob: initial lambda (delta1): how far the target looks ahead. Default 0.9
+    :param mc_final_prob: final lambda. Default 0.9
+    :param mc_fraction: fraction of the training period over which lambda goes from initial to final
+    :param qlearning_initial_prob: initial delta2: the trace weight after a non-greedy action is 1 - delta2. Default 0.0,
+        Peng's Q(lambda); 1.0 is Watkins's
+    :param qlearning_final_prob: final delta2. Default 0.0
+    :param qlearning_fraction: fraction of the training period over which delta2 goes from initial to final
+    :param mc_mixing: ``"lambda"``, the only mode (OffOnDQN's name, accepted so that its arguments carry over)
+    :param sarsa_target: accepted for OffOnDQN's arguments; plays no part
+    :param mc_truncation: after a time-limit truncation, the trace ends on Z(s_T) (``"bootstrap"``, ``"drop"``) or on 0
+        (``"terminal"``)
+    :param loss: ``"huber"``, the quantile Huber loss (QR-DQN's), the only one
+    :param lambda_block_size: the number of consecutive stored transitions whose lambda-returns are computed together
+    :param lambda_refresh_interval: recompute the cached lambda-returns every this many env steps; None (default):
+        whenever the target network is updated
+    :param double_q: the online network picks the bootstrap action (the argmax of its quantiles' mean), the target
+        network's quantiles at that action are the bootstrap law; the trace-cut test uses that action too
+    :param lambda_form: ``"sampled"`` (default) or ``"projected"`` (see above)
+    :param stats_window_size: Window size for the rollout logging, specifying the number of episodes to average
+        the reported success rate, mean episode length, and mean reward over
+    :param tensorboard_log: the log location for tensorboard (if None, no logging)
+    :param policy_kwargs: additional arguments to be passed to the policy on creation (``n_quantiles`` among them)
+    :param verbose: the verbosity level: 0 no output, 1 info, 2 debug
+    :param seed: Seed for the pseudo random generators, including the generator of the sampled horizons
+    :param device: Device (cpu, cuda, ...) on which the code should be run.
+        Setting it to auto, the code will be run on the GPU if possible.
+    :param _init_setup_model: Whether or not to build the network at the creation of the instance
+    """
+
+    policy_aliases: ClassVar[dict[str, type[BasePolicy]]] = {
+        "MlpPolicy": MlpPolicy,
+        "CnnPolicy": CnnPolicy,
+        "MultiInputPolicy": MultiInputPolicy,
+    }
+    mc_schedule: Schedule
+    qlearning_schedule: Schedule
+
+    def __init__(
+        self,
+        policy: str | type[QRDQNPolicy],
+        env: GymEnv | str,
+        learning_rate: float | Schedule = 5e-5,
+        buffer_size: int = 1_000_000,
+        learning_starts: int = 100,
+        batch_size: int = 32,
+        tau: float = 1.0,
+        gamma: float = 0.99,
+        train_freq: int | tuple[int, str] = 4,
+        gradient_steps: int = 1,
+        replay_buffer_class: type[ReplayBuffer] | None = None,
+        replay_buffer_kwargs: dict[str, Any] | None = None,
+        optimize_memory_usage: bool = False,
+        n_steps: int = 1,
+        target_update_interval: int = 10000,
+        exploration_fraction: float = 0.005,
+        exploration_initial_eps: float = 1.0,
+        exploration_final_eps: float = 0.01,
+        max_grad_norm: float | None = None,
+        mc_initial_prob: float = 0.9,
+        mc_final_prob: float = 0.9,
+        mc_fraction: float = 1.0,
+        qlearning_initial_prob: float = 0.0,
+        qlearning_final_prob: float = 0.0,
+        qlearning_fraction: float = 1.0,
+        mc_mixing: str = "lambda",
+        sarsa_target: str = "sampled",
+        mc_truncation: str = "bootstrap",
+        loss: str = "huber",
+        lambda_block_size: int = 100,
+        lambda_refresh_interval: int | None = None,
+        double_q: bool = False,
+        lambda_form: str = "sampled",
+        stats_window_size: int = 100,
+        tensorboard_log: str | None = None,
+        policy_kwargs: dict[str, Any] | None = None,
+        verbose: int = 0,
+        seed: int | None = None,
+        device: th.device | str = "auto",
+        _init_setup_model: bool = True,
+    ) -> None:
+        super().__init__(
+            policy,
+            env,
+            learning_rate=learning_rate,
+            buffer_size=buffer_size,
+            learning_starts=learning_starts,
+            batch_size=batch_size,
+            tau=tau,
+            gamma=gamma,
+            train_freq=train_freq,
+            gradient_steps=gradient_steps,
+            replay_buffer_class=replay_buffer_class,
+            replay_buffer_kwargs=replay_buffer_kwargs,
+            optimize_memory_usage=optimize_memory_usage,
+            n_steps=n_steps,
+            target_update_interval=target_update_interval,
+            exploration_fraction=exploration_fraction,
+            exploration_initial_eps=exploration_initial_eps,
+            exploration_final_eps=exploration_final_eps,
+            max_grad_norm=max_grad_norm,
+            stats_window_size=stats_window_size,
+            tensorboard_log=tensorboard_log,
+            policy_kwargs=policy_kwargs,
+            verbose=verbose,
+            seed=seed,
+            device=device,
+            _init_setup_model=False,
+        )
+        # Work on a copy, so that the caller's dict is left as it was
+        self.replay_buffer_kwargs = dict(self.replay_buffer_kwargs)
+        self.mc_initial_prob = mc_initial_prob
+        self.mc_final_prob = mc_final_prob
+        self.mc_fraction = mc_fraction
+        self.qlearning_initial_prob = qlearning_initial_prob
+        self.qlearning_final_prob = qlearning_final_prob
+        self.qlearning_fraction = qlearning_fraction
+        self.mc_mixing = mc_mixing
+        self.sarsa_target = sarsa_target
+        self.mc_truncation = mc_truncation
+        self.loss = loss
+        self.lambda_block_size = lambda_block_size
+        self.lambda_refresh_interval = lambda_refresh_interval
+        self.double_q = double_q
+        self.lambda_form = lambda_form
+        self._check_buffer_discounting()
+        # The sampled horizons have a generator of their own (saved with the model: a resumed run draws on)
+        self.target_rng = np.random.default_rng(seed)
+        # Current lambda and delta2, updated at each training call (like ``exploration_rate``)
+        self.mc_prob = mc_initial_prob
+        self.qlearning_prob = qlearning_initial_prob
+        if _init_setup_model:
+            self._setup_model()
+
+    def _check_offon_arguments(self) -> None:
+        # Run by _setup_model rather than __init__: load()'s kwargs and custom_objects reach the model without __init__
+        check_lambda_arguments(self)
+        for name, options, what in (
+            ("mc_mixing", SUPPORTED_MC_MIXING, "OffOnDQN's coin-flip modes are not supported by OffOnQRDQN"),
+            ("loss", SUPPORTED_LOSSES, "OffOnQRDQN's loss is the quantile Huber loss"),
+            ("lambda_form", LAMBDA_FORMS, ""),
+        ):
+            try:
+                check_option(name, getattr(self, name), options)
+            except ValueError as error:
+                raise ValueError(f"{error}{f' ({what})' if what else ''}") from None
+        if not isinstance(self.sarsa_target, str):
+            raise ValueError(f"`sarsa_target` must be a string, got {self.sarsa_target!r}")
+
+    def _setup_model(self) -> None:
+        self._check_offon_arguments()
+        self._setup_model_with_offon_buffer()
+        self.mc_schedule = LinearSchedule(self.mc_initial_prob, self.mc_final_prob, self.mc_fraction)
+        self.qlearning_schedule = LinearSchedule(
+            self.qlearning_initial_prob, self.qlearning_final_prob, self.qlearning_fraction
+        )
+        self._connect_replay_buffer()
+        # Never pickled (see _excluded_save_params): a loaded model computes its lambda-returns afresh
+        self._lambda_cache: LambdaReturnCache | None = None
+
+    def _connect_replay_buffer(self) -> None:
+        if not isinstance(self.replay_buffer, OffOnBufferMixin):
+            raise ValueError(
+                f"`replay_buffer_class`: OffOnQRDQN needs an Off-On replay buffer (its episode ends and next actions make "
+                f"the lambda-returns), got {type(self.replay_buffer).__name__}"
+            )
+        # The buffer's Monte-Carlo returns are never read here: no bootstrap pass when an episode is cut
+        self.replay_buffer.truncation_value_fn = None
+        self.replay_buffer.drop_truncated_returns = False
+
+    def _bootstrap_quantiles(self, observations: th.Tensor | dict[str, th.Tensor]) -> tuple[th.Tensor, th.Tensor]:
+        """
+        The bootstrap law at a batch of states s (on the device, under ``no_grad`` at the caller's): the target network's
+        quantiles at a*, shaped (batch, N), and a*: the argmax of the target network's quantile means, or, with
+        ``double_q``, of the online network's (in evaluation mode, as when it acts).
+        """
+        quantiles = self.quantile_net_target(observations)  # (batch, N, actions)
+        if self.double_q:
+            training = self.quantile_net.training
+            self.quantile_net.set_training_mode(False)
+            try:
+                actions = self.quantile_net(observations).mean(dim=1).argmax(dim=1)
+            finally:
+                self.quantile_net.set_training_mode(training)
+        else:
+            actions = quantiles.mean(dim=1).argmax(dim=1)
+        index = actions.reshape(-1, 1, 1).expand(-1, quantiles.shape[1], 1)
+        return quantiles.gather(dim=2, index=index).squeeze(dim=2), actions
+
+    def _target_quantiles_and_actions(self, observations: np.ndarray | dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        """Z_target(s, a*) as (batch, N) and a*, for a batch of (normalised) observations, read back to the host once."""
+        outputs = self._forward_in_chunks(observations, self._bootstrap_quantiles)
+        if not outputs:
+            return np.zeros((0, self.n_quantiles), dtype=np.float32), np.zeros(0, dtype=np.int64)
+        quantiles, actions = outputs
+        # One read-back for both (an action index is exact in float32 up to 2**24 actions)
+        both = th.cat([quantiles, actions.to(quantiles.dtype)[:, None]], dim=1).cpu().numpy()
+        return both[:, :-1], both[:, -1].astype(np.int64)
+
+    def _compute_lambda_cache(self, n_wanted: int, key: int) -> LambdaReturnCache:
+        assert isinstance(self.replay_buffer, OffOnBufferMixin)
+        return compute_quantile_lambda_returns(
+            self.replay_buffer,
+            self._target_quantiles_and_actions,
+            n_wanted=n_wanted,
+            block_size=self.lambda_block_size,
+            gamma=self.gamma,
+            lam=self.mc_prob,
+            qlearning_prob=self.qlearning_prob,
+            cut_is_terminal=self.mc_truncation == "terminal",
+            key=key,
+            form=self.lambda_form,
+            rng=self.target_rng,
+            env=self._vec_normalize_env,
+        )
+
+    def train(self, gradient_steps: int, batch_size: int = 100) -> None:
+        """
+        ``gradient_steps`` updates of the quantile network towards the cached distributional lambda-returns (refreshed
+        first if due), the minibatches gathered and uploaded in chunks, the loss read back once at the end.
+        """
+        assert isinstance(self.replay_buffer, OffOnBufferMixin)
+        self.mc_prob = self.mc_schedule(self._current_progress_remaining)
+        self.qlearning_prob = self.qlearning_schedule(self._current_progress_remaining)
+        self.logger.record("train/mc_prob", self.mc_prob)
+        self.logger.record("train/qlearning_prob", self.qlearning_prob)
+        self.policy.set_training_mode(True)
+        self._update_learning_rate(self.policy.optimizer)
+        cache, entries = self._draw_lambda_entries(gradient_steps * batch_size)
+        parameters = list(self.policy.parameters())
+        losses = []
+        for first_step in range(0, gradient_steps, self._steps_per_chunk(batch_size)):
+            n_steps = min(self._steps_per_chunk(batch_size), gradient_steps - first_step)
+            chunk = entries[first_step * batch_size : (first_step + n_steps) * batch_size]
+            observations, actions = self.replay_buffer.observations_and_actions(
+                cache.slots[chunk], cache.envs[chunk], self._vec_normalize_env
+            )
+            observations_tensor = obs_as_tensor(observations, self.device)
+            actions_tensor = self._to_device(actions.reshape(-1, 1, 1)).long().expand(-1, self.n_quantiles, 1)
+            targets = self._to_device(cache.returns[chunk])
+            for step in range(n_steps):
+                rows = slice(step * batch_size, (step + 1) * batch_size)
+                current_quantiles = self.quantile_net(rows_of(observations_tensor, rows))
+                current_quantiles = th.gather(current_quantiles, dim=2, index=actions_tensor[rows]).squeeze(dim=2)
+                loss = quantile_huber_loss(current_quantiles, targets[rows], sum_over_quantiles=True)
+
+                self.policy.optimizer.zero_grad()
+                loss.backward()
+                if self.max_grad_norm is not None:
+                    th.nn.utils.clip_grad_norm_(parameters, self.max_grad_norm)
+                self.policy.optimizer.step()
+                losses.append(loss.detach())
+
+        self._n_updates += gradient_steps
+        self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
+        self.logger.record("train/loss", th.stack(losses).mean().item())
+        self.logger.record("train/lambda", cache.lam)
+        self.logger.record("train/trace_cut_fraction", cache.trace_cut_fraction)
+
+    def learn(
+        self: SelfOffOnQRDQN,
+        total_timesteps: int,
+        callback: MaybeCallback = None,
+        log_interval: int = 4,
+        tb_log_name: str = "OffOnQRDQN",
+        reset_num_timesteps: bool = True,
+        progress_bar: bool = False,
+    ) -> SelfOffOnQRDQN:
+        return super().learn(
+            total_timesteps=total_timesteps,
+            callback=callback,
+            log_interval=log_interval,
+            tb_log_name=tb_log_name,
+            reset_num_timesteps=reset_num_timesteps,
+            progress_bar=progress_bar,
+        )
+
+    def _excluded_save_params(self) -> list[str]:
+        # The schedules are rebuilt from their parameters in _setup_model
+        return [*super()._excluded_save_params(), "mc_schedule", "qlearning_schedule", "_lambda_cache"]

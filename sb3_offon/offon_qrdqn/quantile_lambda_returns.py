@@ -1,0 +1,186 @@
+"""
+The distributional lambda-returns of OffOnQRDQN: per stored transition, N target atoms for the law of the lambda-return,
+computed at a refresh from one batched pass of the target network over the transitions' next states, as DQN(lambda)
+computes scalar ones (:mod:`sb3_offon.offon_dqn.lambda_returns`, whose blocks, windows and trace cuts are reused).
+
+For a transition t, with Z(s) = Z_target(s, a*) the target network's N quantiles at the bootstrap action a* (the argmax
+of their mean; of the online network's with ``double_q``), the law of the lambda-return is
+
+- Z^lam_t = r_t (a Dirac) where t terminated its episode;
+- Z^lam_t = r_t + gamma Z(s_{t+1}) where t was cut (a time limit, a reset; 0 in place of Z with
+  ``mc_truncation="terminal"``) or is the newest transition of a running episode or of its block;
+- otherwise Z^lam_t = r_t + gamma [(1 - lam c_{t+1}) Z(s_{t+1}) (+) lam c_{t+1} Z^lam_{t+1}], a mixture of laws
+  with those weights, c_{t+1} being 1 after a greedy action and 1 - delta2 after another (as in OffOnDQN).
+
+Unrolled, this is the mixture over horizons k of the k-step laws r_t + ... + gamma^(k-1) r_(t+k-1) + gamma^k Z(s_(t+k)),
+with weights (1 - lam c_(t+k)) prod_(i<k) lam c_(t+i) (the last horizon takes what is left: on a terminated episode,
+the Dirac at its Monte-Carlo return). With n-step windows (``n_steps`` > 1) each step is a window, as in OffOnDQN.
+
+Two ways to turn that law into N atoms (``lambda_form``):
+
+- ``"sampled"``: per transition and refresh, a horizon is drawn from the weights above (the trace goes on past each
+  step with probability lam c, stops otherwise) and the target is that horizon's k-step law, N atoms, with no
+  projection. The quantile loss is an expectation over the target's atoms, linear in the target law, so its expected
+  value over the draw is the loss against the mixture itself: an unbiased stochastic target. O(n) vectorised work.
+- ``"projected"``: the backward recursion above, each mixture of 2N weighted atoms projected back onto N atoms, the
+  mixture's quantile function at tau_i = (2i - 1) / 2N (the W1 projection, as QR-DQN's own). Deterministic, but each
+  step projects a projected law (its error compounds along the trace), and the recursion runs column by column over
+  the blocks: a Python loop over a block's length.
+"""
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from sb3_offon.common.buffers import OffOnBufferMixin
+from sb3_offon.offon_dqn.lambda_returns import LambdaLayout, LambdaReturnCache, backward_recurrence, lambda_layout
+
+LAMBDA_FORMS = ("sampled", "projected")
+
+# Maps a batch of next observations (normalised, in the buffer's layout) to (Z_target(s', a*) as (batch, N), a*) as NumPy
+TargetQuantilesFn = Callable[[Any], tuple[np.ndarray, np.ndarray]]
+
+
+def compute_quantile_lambda_returns(
+    buffer: OffOnBufferMixin,
+    target_quantiles: TargetQuantilesFn,
+    n_wanted: int,
+    block_size: int,
+    gamma: float,
+    lam: float,
+    qlearning_prob: float,
+    cut_is_terminal: bool,
+    key: int,
+    form: str = "sampled",
+    rng: np.random.Generator | None = None,
+    env: Any = None,
+) -> LambdaReturnCache:
+    """
+    The N target atoms of the distributional lambda-returns of about ``n_wanted`` stored transitions (see the module's
+    docstring), in blocks; the cache's ``returns`` are shaped (transitions, N).
+
+    :param buffer: the Off-On replay buffer
+    :param target_quantiles: Z_target(s', a*) and a*, for a batch of next observations
+    :param n_wanted: how many transitions to cover (the whole buffer, in one block per env, if it holds no more)
+    :param block_size: the length of a block (a trace is cut at a block's end)
+    :param gamma: the discount factor
+    :param lam: lambda (delta1)
+    :param qlearning_prob: delta2: the trace weight after a non-greedy action is 1 - delta2
+    :param cut_is_terminal: ``mc_truncation="terminal"``: no value after an episode cut by a time limit or a reset
+    :param key: the refresh key to store
+    :param form: ``"sampled"`` or ``"projected"``
+    :param rng: the generator of the sampled horizons (``"sampled"`` only)
+    :param env: the VecNormalize wrapper, if any, to normalise observations and rewards with
+    """
+    if form not in LAMBDA_FORMS:
+        raise ValueError(f"`lambda_form` must be one of {LAMBDA_FORMS}, got {form!r}")
+    layout = lambda_layout(buffer, n_wanted, block_size, gamma, cut_is_terminal, env)
+    next_quantiles, greedy_actions = target_quantiles(layout.inputs["next_observations"])
+    trace = layout.trace(greedy_actions, qlearning_prob)
+    if form == "sampled":
+        if rng is None:
+            raise ValueError("the sampled form needs a generator (`rng`)")
+        atoms = _sampled_targets(layout, next_quantiles, lam * trace, rng)
+    else:
+        atoms = _projected_targets(layout, next_quantiles, lam * trace)
+    return LambdaReturnCache(
+        slots=layout.slots,
+        envs=layout.envs,
+        added_at=layout.added_at,
+        returns=atoms.astype(np.float32),
+        key=key,
+        lam=lam,
+        qlearning_prob=qlearning_prob,
+        trace_cut_fraction=layout.trace_cut_fraction(trace),
+        whole_buffer=layout.whole_buffer,
+    )
+
+
+def _stop_atoms(layout: LambdaLayout, next_quantiles: np.ndarray) -> np.ndarray:
+    """
+    (padded, N) What follows a transition's window where its trace stops there: Z(s_next), or 0 where no value follows
+    (a termination, or a cut with ``cut_is_terminal``) and the trace could not go on anyway.
+    """
+    zero = ~layout.goes_on & layout.padded(layout.no_value_after, fill=False).astype(bool)
+    padded = layout.padded(next_quantiles.astype(np.float64))
+    padded[zero] = 0.0
+    return padded
+
+
+def _sampled_targets(
+    layout: LambdaLayout, next_quantiles: np.ndarray, continue_prob: np.ndarray, rng: np.random.Generator
+) -> np.ndarray:
+    """
+    (transitions, N) One horizon drawn per transition: past each step of its trace, the trace goes on with probability
+    ``continue_prob`` (lam c) where it can go on, and stops otherwise; the target is R + D Z at the step it stops at,
+    R the discounted rewards up to there and D the discount. R, D and the stopping step are linear recurrences along
+    the trace (``backward_recurrence``), so no loop runs over steps.
+    """
+    stride = layout.stride
+    goes_on = layout.goes_on & (rng.random(layout.valid.shape) < continue_prob)
+    rewards = layout.padded(layout.inputs["rewards"].astype(np.float64))
+    discounts = layout.padded(layout.inputs["discounts"], fill=1.0)
+    coefficients = np.where(goes_on, discounts, 0.0)
+    returns = backward_recurrence(rewards, coefficients, stride=stride)  # R_t = r_t + d_t [goes on] R_{t+s}
+    # D_t = d_t where the trace stops at t, d_t D_{t+s} where it goes on
+    discount_to_stop = backward_recurrence(np.where(goes_on, 0.0, discounts), coefficients, stride=stride)
+    # The (padded, flat) index of the step where the trace stops: exact in float64 (sums of integers times 0 or 1)
+    cells = np.arange(layout.valid.size, dtype=np.float64).reshape(layout.valid.shape)
+    stop = backward_recurrence(np.where(goes_on, 0.0, cells), goes_on.astype(np.float64), stride=stride)
+    stop_cells = np.rint(stop[layout.valid]).astype(np.int64)
+    stop_atoms = _stop_atoms(layout, next_quantiles).reshape(layout.valid.size, -1)[stop_cells]
+    return returns[layout.valid][:, None] + discount_to_stop[layout.valid][:, None] * stop_atoms
+
+
+def _projected_targets(layout: LambdaLayout, next_quantiles: np.ndarray, continue_weight: np.ndarray) -> np.ndarray:
+    """
+    (transitions, N) The backward recursion, one block column at a time (the columns ``stride`` apart being the trace's
+    steps): where the trace goes on, the mixture (1 - lam c) Z(s_next) (+) lam c Z^lam (next step), projected onto N
+    atoms; where it stops, the stop atoms; then r + d times that.
+    """
+    stride, width = layout.stride, layout.valid.shape[1]
+    stop_atoms = _stop_atoms(layout, next_quantiles)
+    rewards = layout.padded(layout.inputs["rewards"].astype(np.float64))
+    discounts = layout.padded(layout.inputs["discounts"], fill=1.0)
+    targets = np.zeros_like(stop_atoms)
+    for column in range(width - 1, -1, -1):
+        after = stop_atoms[:, column]
+        rows = np.flatnonzero(layout.goes_on[:, column])
+        if len(rows):
+            after = after.copy()
+            weight = continue_weight[rows, column]
+            after[rows] = project_mixture(after[rows], 1.0 - weight, targets[rows, column + stride], weight)
+        targets[:, column] = rewards[:, column, None] + discounts[:, column, None] * after
+    return targets[layout.valid]
+
+
+def project_mixture(first: np.ndarray, first_weight: np.ndarray, second: np.ndarray, second_weight: np.ndarray) -> np.ndarray:
+    """
+    The W1 projection onto N atoms of the mixture, row by row, of two laws of N equally weighted atoms each: its
+    quantile function F^-1(tau) = min {x : F(x) >= tau} at tau_i = (2i - 1) / 2N, i = 1..N.
+
+    :param first: (rows, N) atoms of the first law
+    :param first_weight: (rows,) its weight in the mixture
+    :param second: (rows, N) atoms of the second law
+    :param second_weight: (rows,) its weight (the two weights sum to 1)
+    :return: (rows, N) the projected atoms, sorted
+    """
+    n_rows, n_atoms = first.shape
+    atoms = np.concatenate([first, second], axis=1)
+    weights = np.concatenate(
+        [
+            np.repeat(first_weight[:, None] / n_atoms, n_atoms, axis=1),
+            np.repeat(second_weight[:, None] / n_atoms, n_atoms, axis=1),
+        ],
+        axis=1,
+    )
+    order = np.argsort(atoms, axis=1, kind="stable")
+    atoms = np.take_along_axis(atoms, order, axis=1)
+    cumulative = np.cumsum(np.take_along_axis(weights, order, axis=1), axis=1)
+    taus = (2.0 * np.arange(n_atoms) + 1.0) / (2.0 * n_atoms)
+    # One searchsorted over all rows: row r's cumulative weights (in [0, 1]) are shifted by 2r, and its taus likewise
+    shift = 2.0 * np.arange(n_rows)[:, None]
+    found = np.searchsorted((cumulative + shift).ravel(), (taus + shift).ravel(), side="left").reshape(n_rows, n_atoms)
+    columns = np.minimum(found - 2 * n_atoms * np.arange(n_rows)[:, None], 2 * n_atoms - 1)
+    return np.take_along_axis(atoms, columns, axis=1)
