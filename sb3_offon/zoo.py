@@ -31,7 +31,7 @@ import rl_zoo3.train as zoo_train
 import rl_zoo3.utils as zoo_utils
 import yaml
 from rl_zoo3.exp_manager import ExperimentManager
-from rl_zoo3.hyperparams_opt import convert_offpolicy_params, sample_dqn_params
+from rl_zoo3.hyperparams_opt import convert_offpolicy_params, sample_dqn_params, sample_qrdqn_params
 from stable_baselines3 import DQN
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import EvalCallback
@@ -41,6 +41,7 @@ import sb3_offon.envs  # noqa: F401
 from sb3_offon.common.offon_model import MC_TRUNCATION_OPTIONS
 from sb3_offon.offon_dqn import OffOnDQN
 from sb3_offon.offon_dqn.offon_dqn import LOSS_FUNCTIONS, MC_MIXING_OPTIONS, SARSA_TARGET_OPTIONS
+from sb3_offon.offon_qrdqn import OffOnQRDQN
 from sb3_offon.qrdqn import QRDQN
 from sb3_offon.resume import STOPPED_FILE, Checkpoint, RunCheckpoint, joined_monitor
 from sb3_offon.torch_layers import MinAtarCNN
@@ -66,6 +67,7 @@ ALGOS: dict[str, type[BaseAlgorithm]] = {
     "offon_watkins": OffOnDQN,
     "qrdqn": QRDQN,
     "qrdqn_nstep": QRDQN,
+    "offon_qrdqn": OffOnQRDQN,
 }
 
 # Former names (hyperparams/aliases.yml): each trains what its new name does and logs under the name it was given
@@ -84,6 +86,7 @@ ALGO_SUMMARIES: dict[str, str] = {
     "offon_watkins": "lambda-returns, lambda 0.9, Watkins's Q(lambda)",
     "qrdqn": "sb3-contrib's QR-DQN, its loss from sorted targets (same results, faster)",
     "qrdqn_nstep": "QR-DQN with n-step returns (sb3-contrib's n_steps, n in the YAML)",
+    "offon_qrdqn": "OffOnQRDQN's defaults: QR-DQN on lambda-returns, lambda 0.9, Peng's Q(lambda)",
     **{alias: f"former name of {name}" for alias, name in ALIASES.items()},
 }
 
@@ -373,6 +376,38 @@ def sample_dqn_nstep_params(trial: optuna.Trial, n_actions: int, n_envs: int, ad
     return hyperparams
 
 
+def sample_qrdqn_nstep_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
+    """
+    Sampler for n-step QR-DQN: the zoo's QR-DQN parameters and ``n_steps`` among 3, 5 and 10.
+
+    :param trial: the Optuna trial
+    :param n_actions: number of actions (part of the zoo's sampler signature)
+    :param n_envs: number of training envs
+    :param additional_args: the zoo's extra arguments (``using_her_replay_buffer``, ``her_kwargs``)
+    :return: the keyword arguments of the algorithm
+    """
+    hyperparams = sample_qrdqn_params(trial, n_actions, n_envs, additional_args)
+    hyperparams["n_steps"] = trial.suggest_categorical("n_steps", [3, 5, 10])
+    return hyperparams
+
+
+def sample_offon_qrdqn_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
+    """
+    Sampler for OffOnQRDQN: the zoo's QR-DQN parameters (``n_quantiles`` among them) and the lambda (delta1) and delta2
+    schedules, sampled as for OffOnDQN's lambda-returns (:func:`sample_offon_lambda_params`).
+
+    :param trial: the Optuna trial
+    :param n_actions: number of actions (part of the zoo's sampler signature)
+    :param n_envs: number of training envs
+    :param additional_args: the zoo's extra arguments (``using_her_replay_buffer``, ``her_kwargs``)
+    :return: the keyword arguments of the algorithm
+    """
+    hyperparams = sample_qrdqn_params(trial, n_actions, n_envs, additional_args)
+    hyperparams.update(_sample_mc_params(trial, lambda_returns=True))
+    hyperparams.update(_sample_qlearning_params(trial, sarsa_target=False))
+    return hyperparams
+
+
 SAMPLERS = {
     "dqn_nstep": sample_dqn_nstep_params,
     "offon_paper": sample_offon_paper_params,
@@ -382,6 +417,8 @@ SAMPLERS = {
     "offon_mc_decay": sample_dqn_mc_params,
     "offon_watkins": sample_offon_lambda_params,
     "offon_dqn": sample_offon_lambda_params,
+    "qrdqn_nstep": sample_qrdqn_nstep_params,
+    "offon_qrdqn": sample_offon_qrdqn_params,
 }
 SAMPLERS.update({alias: SAMPLERS[name] for alias, name in ALIASES.items()})
 

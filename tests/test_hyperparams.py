@@ -13,7 +13,7 @@ from rl_zoo3.exp_manager import ExperimentManager
 from rl_zoo3.hyperparams_opt import HYPERPARAMS_CONVERTER, HYPERPARAMS_SAMPLER
 from stable_baselines3 import DQN
 
-from sb3_offon import OffOnDQN
+from sb3_offon import OffOnDQN, OffOnQRDQN
 from sb3_offon.callbacks import GoalCountCallback, StopOnMeanTrainingReward
 from sb3_offon.minatar_envs import minatar_ids
 from sb3_offon.offon_dqn.offon_dqn import OFFON_PARAMETERS
@@ -25,7 +25,7 @@ register()
 
 PAPER_CLASSES = {"offon_paper": OffOnDQN, "dqn_mc": DQNMC, "dqn_sarsa": DQNSarsa, "dqn": DQN}
 # The head-to-heads' baselines (n-step DQN, QR-DQN) have entries for the four benchmark tasks only
-BASELINE_CLASSES = {"dqn_nstep": DQN, "qrdqn": QRDQN, "qrdqn_nstep": QRDQN}
+BASELINE_CLASSES = {"dqn_nstep": DQN, "qrdqn": QRDQN, "qrdqn_nstep": QRDQN, "offon_qrdqn": OffOnQRDQN}
 # The configuration the search chose on tuning seeds 0-4: the four tasks and the search's stochastic one
 CHOICE_CLASSES = {"offon_mc_decay": OffOnDQN}
 # The lambda-return mode: OffOnDQN with mc_mixing="lambda" on the same tasks
@@ -36,7 +36,7 @@ CHOICE_ENVS = BASELINE_ENVS | {"FrozenLake-v1"}
 # The MinAtar games' entries (tests/test_minatar.py checks their values): in the files of the MinAtar head-to-head's
 # algorithms, and in offon_watkins.yml, which offon_dqn.yml repeats entry for entry
 MINATAR_ENVS = set(minatar_ids())
-MINATAR_FILES = {"dqn", "dqn_nstep", "qrdqn", "qrdqn_nstep", "offon_paper", "offon_watkins", "offon_dqn"}
+MINATAR_FILES = {"dqn", "dqn_nstep", "qrdqn", "qrdqn_nstep", "offon_qrdqn", "offon_paper", "offon_watkins", "offon_dqn"}
 # The search's winner, `mc_sample` (results/search/README.md): the paper's delta1 schedule, no Sarsa, SB3's loss
 CHOICE_TARGETS = dict(
     mc_initial_prob=0.99,
@@ -121,6 +121,11 @@ def test_nstep_qrdqn_is_qrdqn_with_the_n_of_nstep_dqn() -> None:
     for env_id, entry in entries.items():
         assert {key: value for key, value in entry.items() if key != "n_steps"} == qrdqn[env_id], env_id
         assert entry["n_steps"] == nstep_dqn[env_id]["n_steps"], env_id
+
+
+def test_offon_qrdqn_has_qrdqns_settings() -> None:
+    """offon_qrdqn.yml is qrdqn.yml entry for entry: the lambda-return settings are OffOnQRDQN's defaults."""
+    assert load(HYPERPARAMS_DIR / "offon_qrdqn.yml") == load(HYPERPARAMS_DIR / "qrdqn.yml")
 
 
 def test_nstep_entries_are_the_search_choice() -> None:
@@ -255,7 +260,7 @@ def build(algo: str, env_id: str, config: Path, log_folder: Path) -> tuple[Any, 
 @pytest.mark.parametrize("file_set, algo, entry", entries())
 def test_every_entry_builds_a_model(tmp_path: Path, file_set: str, algo: str, entry: str) -> None:
     if entry == "atari":
-        if algo in ("qrdqn", "qrdqn_nstep"):
+        if algo in ("qrdqn", "qrdqn_nstep", "offon_qrdqn"):
             pytest.skip("the zoo's QR-DQN Atari entry keeps QRDQN's default 1M-frame buffer: 26 GiB to build")
         if not HAS_ALE:
             pytest.skip("ale-py is not installed")
@@ -296,6 +301,17 @@ def test_sampler(algo: str) -> None:
         assert {"gamma", "learning_rate", "batch_size", "target_update_interval"} <= set(sampled)
         if algo == "dqn_nstep":
             assert sampled["n_steps"] in (3, 5, 10)
+            continue
+        if algo in ("qrdqn_nstep", "offon_qrdqn"):
+            assert 5 <= sampled["policy_kwargs"]["n_quantiles"] <= 200
+            if algo == "qrdqn_nstep":
+                assert sampled["n_steps"] in (3, 5, 10)
+            else:  # lambda and delta2 schedules; no coin flips, no Sarsa target, no loss to choose
+                assert {"mc_initial_prob", "mc_final_prob", "qlearning_initial_prob", "mc_truncation"} <= set(sampled)
+                assert not {"mc_mixing", "sarsa_target", "loss"} & set(sampled)
+            model = ALGOS[algo]("MlpPolicy", "CartPole-v1", device="cpu", **sampled)
+            assert model.policy.n_quantiles == sampled["policy_kwargs"]["n_quantiles"]
+            study.tell(trial, 0.0)
             continue
         if ALIASES.get(algo, algo) in LAMBDA_CLASSES:
             # lambda and delta2 schedules; mc_mixing stays the YAML's "lambda", and there is no Sarsa target to choose
