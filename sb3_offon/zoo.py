@@ -86,7 +86,7 @@ ALGO_SUMMARIES: dict[str, str] = {
     "offon_watkins": "lambda-returns, lambda 0.9, Watkins's Q(lambda)",
     "qrdqn": "sb3-contrib's QR-DQN, its loss from sorted targets (same results, faster)",
     "qrdqn_nstep": "QR-DQN with n-step returns (sb3-contrib's n_steps, n in the YAML)",
-    "offon_qrdqn": "OffOnQRDQN's defaults: QR-DQN on lambda-returns, lambda 0.9, Peng's Q(lambda)",
+    "offon_qrdqn": "OffOnQRDQN's defaults: QR-DQN on lambda-returns, lambda 0.9, Peng's",
     **{alias: f"former name of {name}" for alias, name in ALIASES.items()},
 }
 
