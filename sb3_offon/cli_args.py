@@ -27,6 +27,7 @@ from rl_zoo3.utils import StoreDict
 
 from sb3_offon.common.offon_model import MC_TRUNCATION_OPTIONS
 from sb3_offon.offon_dqn.offon_dqn import LOSS_FUNCTIONS, MC_MIXING_OPTIONS, SARSA_TARGET_OPTIONS
+from sb3_offon.offon_qrdqn.quantile_lambda_returns import LAMBDA_FORMS
 
 # The string-valued options of OffOnDQN and its variants, and their choices. "max" is also a Python builtin: without
 # this table ``mc_mixing:max`` would evaluate to the function
@@ -35,6 +36,7 @@ STRING_OPTIONS: dict[str, tuple[str, ...]] = {
     "sarsa_target": SARSA_TARGET_OPTIONS,
     "mc_truncation": MC_TRUNCATION_OPTIONS,
     "loss": tuple(LOSS_FUNCTIONS),
+    "lambda_form": LAMBDA_FORMS,
 }
 
 
