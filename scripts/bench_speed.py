@@ -1,12 +1,16 @@
 """
-Speed benchmark: environment steps per second of OffOnDQN against SB3's DQN at identical hyperparameters.
+Speed benchmark: environment steps per second of OffOnDQN against SB3's DQN at identical hyperparameters (or, with
+``--candidate offon_qrdqn``, of OffOnQRDQN against this package's QR-DQN).
 
 Both algorithms get the same hyperparameter dict (rl-zoo's tuned DQN settings for the env; the MinAtar paper's for
 MinAtar/Breakout-v0) and the same seed. OffOnDQN's targets (``--mode``): ``defaults``, its constructor's (lambda-returns,
 lambda 0.9, Peng's Q(lambda)); ``paper``, the paper's coin flips (``PAPER_TARGETS``); ``lambda``, ``offon_lambda``'s
 (lambda 0.9, Watkins's cuts); ``double_q``, the defaults with double Q-learning. The baseline (``--baseline``, the "DQN"
 columns): SB3's DQN, SB3's DQN with ``n_steps=10`` (``dqn_nstep``), or OffOnDQN with its defaults (``offon_defaults``,
-to measure what an option of OffOnDQN costs).
+to measure what an option of OffOnDQN costs). ``--candidate offon_qrdqn`` measures the QR-DQN family instead: OffOnQRDQN
+(``--mode defaults``, its constructor's; ``projected``, the projected recursion; ``double_q``) against
+``sb3_offon.qrdqn.QRDQN`` (``--baseline qrdqn``, its default then), both with QR-DQN's default 200 quantiles. Tables and
+JSON keep the roles' names ("DQN" the baseline, "OffOnDQN" the candidate) and say which classes they are.
 
 The two runs of a pair take turns in one process: each learn() runs in a thread of its own, and they hand a baton
 to each other every ``--switch-every`` env steps (from a callback), so only one of them computes at any time. A
@@ -27,6 +31,7 @@ Usage:
     python scripts/bench_speed.py --env LunarLander-v3 --mode lambda --baseline dqn_nstep --repeats 5
     python scripts/bench_speed.py --env MinAtar/Breakout-v0 --mode defaults --train-freq 1 --timesteps 15000 --prefill 5000
     python scripts/bench_speed.py --env LunarLander-v3 --mode double_q --baseline offon_defaults
+    python scripts/bench_speed.py --env MinAtar/Breakout-v0 --candidate offon_qrdqn --prefill 10000 --flush-denormals
 
 ``--env AtariShaped`` is an Atari-shaped task made up on the spot (4 stacked 84x84 uint8 frames, episodes of 200 steps
 that end by termination, CnnPolicy, the zoo's Atari DQN settings with a smaller buffer), so that CNNs can be measured,
@@ -55,8 +60,9 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.envs import FakeImageEnv
 
 import sb3_offon
-from sb3_offon import PAPER_TARGETS, MinAtarCNN, OffOnDQN
+from sb3_offon import PAPER_TARGETS, MinAtarCNN, OffOnDQN, OffOnQRDQN
 from sb3_offon.offon_dqn.offon_dqn import OFFON_PARAMETERS
+from sb3_offon.qrdqn import QRDQN
 
 # rl-baselines3-zoo's tuned DQN hyperparameters (hyperparams/dqn.yml), minus n_timesteps and the policy name
 ZOO_HYPERPARAMS = {
@@ -127,18 +133,28 @@ ZOO_HYPERPARAMS[MINATAR_BREAKOUT] = dict(
 LAMBDA_TARGETS = dict(
     mc_mixing="lambda", mc_initial_prob=0.9, mc_final_prob=0.9, qlearning_initial_prob=1.0, qlearning_final_prob=1.0
 )
-MODES = {"defaults": {}, "paper": dict(PAPER_TARGETS), "lambda": LAMBDA_TARGETS, "double_q": dict(double_q=True)}
+MODES = {
+    "defaults": {},
+    "paper": dict(PAPER_TARGETS),
+    "lambda": LAMBDA_TARGETS,
+    "double_q": dict(double_q=True),
+    "projected": dict(lambda_form="projected"),  # OffOnQRDQN only
+}
+# --candidate: the class of the "OffOnDQN" runs, and the baseline it is measured against unless --baseline says
+CANDIDATES: dict[str, tuple[type, str]] = {"offon_dqn": (OffOnDQN, "dqn"), "offon_qrdqn": (OffOnQRDQN, "qrdqn")}
 # --baseline: the class and arguments of the "DQN" runs. dqn_nstep: SB3's n-step DQN as in the classic-control
 # head-to-heads (hyperparams/dqn_nstep.yml uses n = 10 on those tasks)
 BASELINES: dict[str, tuple[type[DQN], dict]] = {
     "dqn": (DQN, {}),
     "dqn_nstep": (DQN, dict(n_steps=10)),
     "offon_defaults": (OffOnDQN, {}),
+    "qrdqn": (QRDQN, {}),
 }
 BASELINE_NAMES = {
     "dqn": "SB3's DQN",
     "dqn_nstep": "SB3's DQN with n_steps=10 (n-step DQN)",
     "offon_defaults": "OffOnDQN with its defaults",
+    "qrdqn": "sb3_offon.qrdqn.QRDQN (QR-DQN)",
 }
 ZOO_TIMESTEPS = {"CartPole-v1": 50_000, "LunarLander-v3": 100_000, ATARI_SHAPED: 10_000_000, MINATAR_BREAKOUT: 1_000_000}
 POLICIES = {"CartPole-v1": "MlpPolicy", "LunarLander-v3": "MlpPolicy", ATARI_SHAPED: "CnnPolicy"}
@@ -204,10 +220,22 @@ def parse_args() -> argparse.Namespace:
     )
     parser.add_argument("--mode", choices=sorted(MODES), default="defaults", help="OffOnDQN's targets (default: defaults)")
     parser.add_argument(
+        "--candidate",
+        choices=sorted(CANDIDATES),
+        default="offon_dqn",
+        help="the algorithm measured: OffOnDQN (default) or OffOnQRDQN",
+    )
+    parser.add_argument(
         "--baseline",
         choices=sorted(BASELINES),
-        default="dqn",
-        help="SB3's DQN, its n-step DQN (n = 10), or OffOnDQN with its defaults (default: dqn)",
+        default=None,
+        help="SB3's DQN, its n-step DQN (n = 10), OffOnDQN with its defaults, or QR-DQN (default: dqn for OffOnDQN, "
+        "qrdqn for OffOnQRDQN)",
+    )
+    parser.add_argument(
+        "--flush-denormals",
+        action="store_true",
+        help="flush denormal floats to zero on the CPU, as the command line does by default (python -m sb3_offon.train)",
     )
     parser.add_argument(
         "--train-freq", type=int, default=None, help="env steps between gradient steps, for both runs (default: the settings')"
@@ -284,7 +312,7 @@ class TakeTurns(BaseCallback):
 
 
 def build(
-    algo_class: type[DQN], env_id: str, hyperparams: dict, seed: int, device: str = "cpu", extra: dict | None = None
+    algo_class: type, env_id: str, hyperparams: dict, seed: int, device: str = "cpu", extra: dict | None = None
 ) -> tuple[DQN, list[float]]:
     """A model whose train() time is summed into the returned one-element list (``extra``: its own arguments)."""
     kwargs = {**hyperparams, **(extra or {})}
@@ -313,7 +341,7 @@ def run_pair(
     device: str = "cpu",
     extra_kwargs: dict[str, dict] | None = None,
     prefill: int = 0,
-    classes: dict[str, type[DQN]] | None = None,
+    classes: dict[str, type] | None = None,
 ) -> dict:
     """
     Build both models (untimed), then run their learn() calls taking turns; one result dict per role.
@@ -377,8 +405,8 @@ def run_pair(
             "loadavg_before": load_before,
             "loadavg_after": load_after,
         }
-        if isinstance(model, OffOnDQN):
-            runs[name]["offon_parameters"] = {key: getattr(model, key) for key in OFFON_PARAMETERS}
+        if isinstance(model, (OffOnDQN, OffOnQRDQN)):
+            runs[name]["offon_parameters"] = {key: getattr(model, key) for key in OFFON_PARAMETERS if hasattr(model, key)}
         model.env.close()
     return runs
 
@@ -412,6 +440,11 @@ def markdown_table(result: dict) -> str:
         *(
             [f"The DQN columns and rows are the baseline's: {BASELINE_NAMES[result['baseline']]}.", ""]
             if result.get("baseline", "dqn") != "dqn"
+            else []
+        ),
+        *(
+            [f"The OffOnDQN columns and rows are {result['candidate_class']}'s.", ""]
+            if result.get("candidate_class", "OffOnDQN") != "OffOnDQN"
             else []
         ),
         "| pair | order | DQN steps/s | OffOnDQN steps/s | ratio | DQN CPU steps/s | OffOnDQN CPU steps/s | CPU ratio |",
@@ -457,12 +490,15 @@ def markdown_table(result: dict) -> str:
 if __name__ == "__main__":
     args = parse_args()
     th.set_num_threads(args.threads)
+    th.set_flush_denormal(args.flush_denormals)
+    candidate_class, default_baseline = CANDIDATES[args.candidate]
+    args.baseline = args.baseline or default_baseline
     hyperparams = dict(ZOO_HYPERPARAMS[args.env])  # one dict, passed as it is to both algorithms
     if args.train_freq is not None:
         hyperparams["train_freq"] = args.train_freq
     # The baseline's and OffOnDQN's own arguments (the "DQN" columns are the baseline's, n-step DQN's with dqn_nstep)
     baseline_class, baseline_kwargs = BASELINES[args.baseline]
-    classes = {"DQN": baseline_class}
+    classes = {"DQN": baseline_class, "OffOnDQN": candidate_class}
     extra_kwargs = {"DQN": baseline_kwargs, "OffOnDQN": MODES[args.mode]}
     make_env(args.env).close()  # fail early if the env (Box2D for LunarLander) is missing
     if args.device == "cuda" and not th.cuda.is_available():
@@ -484,6 +520,8 @@ if __name__ == "__main__":
         "baseline_class": baseline_class.__name__,
         "baseline_kwargs": baseline_kwargs,
         "mode": args.mode,
+        "candidate_class": candidate_class.__name__,
+        "flush_denormals": args.flush_denormals,
         "prefill": args.prefill,
         "cpu_count": os.cpu_count(),
         "platform": platform.platform(),

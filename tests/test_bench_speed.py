@@ -16,7 +16,8 @@ import pytest
 from helpers import SCRIPTS, load_script
 from stable_baselines3 import DQN
 
-from sb3_offon import OffOnDQN
+from sb3_offon import OffOnDQN, OffOnQRDQN
+from sb3_offon.qrdqn import QRDQN
 
 HYPERPARAMS = dict(
     learning_starts=100, train_freq=16, gradient_steps=8, batch_size=32, buffer_size=1000, policy_kwargs=dict(net_arch=[16])
@@ -35,8 +36,16 @@ def parameters_digest(model) -> str:
         ({"DQN": {"n_steps": 10}, "OffOnDQN": {"mc_mixing": "sample", "mc_initial_prob": 0.9, "mc_final_prob": 0.9}}, None),
         # An option of OffOnDQN against its defaults: both runs are OffOnDQN
         ({"OffOnDQN": {"double_q": True}}, {"DQN": OffOnDQN}),
+        # The QR-DQN family: OffOnQRDQN against the package's QR-DQN
+        (
+            {
+                "DQN": {"policy_kwargs": dict(net_arch=[16], n_quantiles=5)},
+                "OffOnDQN": {"policy_kwargs": dict(net_arch=[16], n_quantiles=5)},
+            },
+            {"DQN": QRDQN, "OffOnDQN": OffOnQRDQN},
+        ),
     ],
-    ids=["dqn-defaults", "nstep-coin-flips", "offon-double-q"],
+    ids=["dqn-defaults", "nstep-coin-flips", "offon-double-q", "qrdqn-family"],
 )
 def test_runs_taking_turns_learn_what_they_learn_alone(monkeypatch, extra_kwargs, classes):
     bench_speed = load_script("bench_speed")
@@ -55,12 +64,13 @@ def test_runs_taking_turns_learn_what_they_learn_alone(monkeypatch, extra_kwargs
         ("DQN", "OffOnDQN"), "CartPole-v1", HYPERPARAMS, TIMESTEPS, 3, 50, extra_kwargs=extra_kwargs, classes=classes
     )
 
-    assert [type(model) for model in built] == [(classes or {}).get("DQN", DQN), OffOnDQN]
+    assert [type(model) for model in built] == [(classes or {}).get("DQN", DQN), (classes or {}).get("OffOnDQN", OffOnDQN)]
     for role, model in zip(("DQN", "OffOnDQN"), built, strict=True):
         own = (extra_kwargs or {}).get(role, {})
-        alone = type(model)("MlpPolicy", "CartPole-v1", seed=3, device="cpu", **HYPERPARAMS, **own).learn(TIMESTEPS)
+        alone = type(model)("MlpPolicy", "CartPole-v1", seed=3, device="cpu", **{**HYPERPARAMS, **own}).learn(TIMESTEPS)
         for key, value in own.items():
-            assert getattr(model, key) == value, key
+            if key != "policy_kwargs":
+                assert getattr(model, key) == value, key
         assert parameters_digest(model) == parameters_digest(alone), role
         run = runs[role]
         assert run["class"] == type(model).__name__
