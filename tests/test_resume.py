@@ -18,7 +18,7 @@ from stable_baselines3.common.buffers import ReplayBuffer
 from stable_baselines3.common.callbacks import EvalCallback
 from stable_baselines3.common.monitor import Monitor
 
-from sb3_offon import OffOnDQN
+from sb3_offon import OffOnDQN, OffOnQRDQN
 from sb3_offon.callbacks import StopOnMeanTrainingReward
 from sb3_offon.resume import Checkpoint, RunCheckpoint, cut_running_episodes, joined_monitor, resumed_seed
 from sb3_offon.train import main
@@ -83,7 +83,10 @@ def monitor_rows(path: Path) -> list[list[float]]:
     return [[float(cell) for cell in line.split(",")] for line in path.read_text().splitlines()[2:]]
 
 
-@pytest.mark.parametrize("algo, algo_class", [("offon_dqn", OffOnDQN), ("dqn_nstep", DQN), ("qrdqn", QRDQN)])
+@pytest.mark.parametrize(
+    "algo, algo_class",
+    [("offon_dqn", OffOnDQN), ("dqn_nstep", DQN), ("qrdqn", QRDQN), ("offon_qrdqn", OffOnQRDQN), ("qrdqn_nstep", QRDQN)],
+)
 def test_an_interrupted_run_resumes_as_the_uninterrupted_one_goes(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, algo: str, algo_class: type[DQN]
 ) -> None:
@@ -98,7 +101,7 @@ def test_an_interrupted_run_resumes_as_the_uninterrupted_one_goes(
     # ignored: the loaded buffer's is used), the cut transitions are marked when it is loaded
     with open(checkpoint.folder / "replay_buffer.pkl", "rb") as file:
         buffer = pickle.load(file)
-    assert buffer.pos == 2048 and getattr(buffer, "n_steps", 1) == (10 if algo == "dqn_nstep" else 1)
+    assert buffer.pos == 2048 and getattr(buffer, "n_steps", 1) == (10 if algo in ("dqn_nstep", "qrdqn_nstep") else 1)
     cut_evaluations = np.load(cut / "evaluations.npz")
     np.testing.assert_array_equal(cut_evaluations["timesteps"], [1000, 2000])
 
