@@ -57,7 +57,7 @@ def make_minatar(game: str, use_minimal_action_set: bool = False, **kwargs: Any)
     :raises ModuleNotFoundError: when MinAtar is not installed, naming the extra that brings it
     """
     try:
-        from minatar.gym import BaseEnv  # type: ignore[import-untyped]
+        from minatar.gym import BaseEnv
     except ModuleNotFoundError as error:
         # Not MinAtar itself (one of its own dependencies, say): a broken install, whose traceback says more
         if error.name is None or error.name.partition(".")[0] != "minatar":
