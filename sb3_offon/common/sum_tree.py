@@ -1,7 +1,6 @@
 """
 A sum tree (with a min tree beside it) over a replay buffer's priorities: the data structure that proportional prioritised
-experience replay samples from (Schaul, Quan, Antonoglou and Silver, "Prioritized Experience Replay", ICLR 2016,
-section 3.3 and appendix B.2.1).
+experience replay samples from (Schaul, Quan, Antonoglou and Silver, "Prioritized Experience Replay", ICLR 2016).
 
 Each of the ``capacity`` leaves holds one transition's priority ``p_i`` (already raised to the power alpha by the
 caller). Transition ``i`` is drawn with probability ``p_i / sum_k p_k``: a value ``u`` uniform in ``[0, total)`` falls in
@@ -194,7 +193,7 @@ class SumTree:
 
     def sample(self, batch_size: int, rng: np.random.Generator) -> np.ndarray:
         """
-        Stratified proportional sampling (Schaul et al. 2016, appendix B.2.1): ``[0, total)`` is split into
+        Stratified proportional sampling (as Schaul et al. 2016 sample their minibatches): ``[0, total)`` is split into
         ``batch_size`` equal segments and one value is drawn uniformly in each. Each leaf is drawn with probability
         ``p_i / total`` on average over the batch, with less variance than independent draws; draw ``k`` comes from
         segment ``k``, so the indices come out in non-decreasing order.
