@@ -104,6 +104,7 @@ def test_tables_say_which_baseline_the_dqn_columns_are(name):
     assert table.splitlines()[4 if said else 2].startswith("| pair | order | DQN steps/s |")
 
 
+@pytest.mark.slow
 def test_the_qrdqn_loss_benchmark_writes_its_table(tmp_path):
     pytest.importorskip("minatar", reason="the 'minatar' extra is not installed")  # it times MinAtar/Breakout-v0
     # A tiny run of scripts/bench_qrdqn_loss.py (no speed asserted): both classes timed, the loss alone too

@@ -160,6 +160,7 @@ def test_code_version_without_git_comes_from_the_environment(tmp_path: Path, mon
     assert module.code_version() == {"commit": "unknown"}
 
 
+@pytest.mark.slow
 def test_local_pool_writes_the_zoo_layout(local_root: Path):
     for folder in run_folders(local_root):
         done = json.loads((folder / "done.json").read_text())
@@ -179,6 +180,7 @@ def test_local_pool_writes_the_zoo_layout(local_root: Path):
         assert not [path for path in folder.rglob("*") if path.suffix in (".zip", ".pkl")]
 
 
+@pytest.mark.slow
 def test_resume_redoes_only_the_unfinished_run(local_root: Path):
     folders = run_folders(local_root)
     # A key the runner never writes marks each done.json: a rewritten one loses it. (Modification times would say the
@@ -299,6 +301,7 @@ def test_a_run_another_runner_holds_is_left_to_it(tmp_path: Path, monkeypatch: p
     assert module.claim(root, spec) is None, "a finished run is not taken again"
 
 
+@pytest.mark.slow
 def test_ray_runs_the_same_task(local_root: Path, tmp_path: Path):
     pytest.importorskip("ray")
     root = tmp_path / "raw"
@@ -310,6 +313,7 @@ def test_ray_runs_the_same_task(local_root: Path, tmp_path: Path):
             np.testing.assert_array_equal(evaluations(ray_folder)[key], values)
 
 
+@pytest.mark.slow
 def test_plot_writes_every_figure_and_table(local_root: Path, tmp_path: Path):
     # The Section 4.4 tasks, one seed, for Figures 13-16
     check(benchmark(local_root, "--envs", *SECTION_44, "--seeds", "1"))

@@ -26,6 +26,8 @@ from sb3_offon.zoo import HYPERPARAMS_DIR, register
 
 # Ours and SB3's DQN, all from the zoo's table
 register()
+# Every test here reads the module's trainings (two minutes on a busy 2-core machine): all in the slow set
+pytestmark = pytest.mark.slow
 ALGORITHMS = ["offon_dqn", "dqn_mc", "dqn_sarsa", "dqn"]
 N_STEPS = 300
 TIMEOUT = 600

@@ -46,6 +46,7 @@ def test_argument_error_in_the_package_is_one_line(capsys: pytest.CaptureFixture
     assert err.count("\n") == 1 and "`sarsa_target` must be one of" in err and "'nope'" in err
 
 
+@pytest.mark.slow
 def test_help_and_bad_hyperparameter_on_the_command_line(tmp_path: Path) -> None:
     commands = {
         "help": ["--help"],

@@ -89,6 +89,7 @@ def test_flushing_leaves_the_parameters_as_they_are(algo: type[DQN]) -> None:
         assert th.equal(kept_parameter, flushed_parameters[name]), name
 
 
+@pytest.mark.slow
 def test_the_benchmark_compares_both_arithmetics_from_a_checkpoint(tmp_path) -> None:
     # scripts/bench_denormals.py on a checkpoint laid out as benchmark.py keeps them (<run>/<step>/); no speed asserted
     model = trained_with_denormals(DQN, flush=False)

@@ -90,14 +90,18 @@ def test_schedules_decay_linearly_then_stay():
         {"n_envs": 1},
         {"optimize_memory_usage": True, "replay_buffer_kwargs": {"handle_timeout_termination": False}},
         # Many gradient steps per call, on a buffer that fills and wraps around: one gather for all of a call's steps
-        {"n_envs": 1, "gradient_steps": 24, "buffer_size": 300},
-        {
-            "optimize_memory_usage": True,
-            "replay_buffer_kwargs": {"handle_timeout_termination": False},
-            "n_envs": 1,
-            "gradient_steps": 24,
-            "buffer_size": 300,
-        },
+        # (15 to 30 s each on a busy 2-core machine: the slow set)
+        pytest.param({"n_envs": 1, "gradient_steps": 24, "buffer_size": 300}, marks=pytest.mark.slow),
+        pytest.param(
+            {
+                "optimize_memory_usage": True,
+                "replay_buffer_kwargs": {"handle_timeout_termination": False},
+                "n_envs": 1,
+                "gradient_steps": 24,
+                "buffer_size": 300,
+            },
+            marks=pytest.mark.slow,
+        ),
     ],
     ids=["1-step", "3-step", "one-env", "optimize-memory", "one-env-many-steps", "optimize-memory-many-steps"],
 )

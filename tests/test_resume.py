@@ -87,6 +87,7 @@ def monitor_rows(path: Path) -> list[list[float]]:
     "algo, algo_class",
     [("offon_dqn", OffOnDQN), ("dqn_nstep", DQN), ("qrdqn", QRDQN), ("offon_qrdqn", OffOnQRDQN), ("qrdqn_nstep", QRDQN)],
 )
+@pytest.mark.slow
 def test_an_interrupted_run_resumes_as_the_uninterrupted_one_goes(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, algo: str, algo_class: type[DQN]
 ) -> None:
@@ -177,6 +178,7 @@ def test_the_resumed_model_is_the_checkpointed_one(tmp_path: Path, monkeypatch: 
     np.testing.assert_array_equal(live_returns[: last + 1][~running], loaded_returns[: last + 1][~running])
 
 
+@pytest.mark.slow
 def test_two_envs_resume_with_both_monitor_files(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     two = ("n_envs:2",)
     whole = train(monkeypatch, tmp_path / "whole", "offon_dqn", hyperparams=two)

@@ -151,6 +151,7 @@ def sb3_subprocess_env() -> dict[str, str]:
     return env
 
 
+@pytest.mark.slow
 @pytest.mark.sb3_suite
 def test_sb3_dqn_tests_pass_with_offon_dqn(tmp_path):
     if os.environ.get("SB3_OFFON_SKIP_SB3_SUITE") == "1":

@@ -223,6 +223,7 @@ def test_interval_estimates_do_not_depend_on_the_other_algorithms() -> None:
 COMMITTED = ["paper", "tuned", "headtohead", "headtohead2", "minatar"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", COMMITTED)
 def test_the_reporter_reproduces_the_committed_report(tmp_path: Path, name: str, monkeypatch: pytest.MonkeyPatch) -> None:
     study_module = load_script("study")
@@ -236,6 +237,7 @@ def test_the_reporter_reproduces_the_committed_report(tmp_path: Path, name: str,
             assert (tmp_path / generated).read_text() == committed.read_text(), generated
 
 
+@pytest.mark.slow
 def test_the_published_verdicts() -> None:
     """The head-to-heads' verdicts and the figures their reports quote, from the committed runs."""
     study_module = load_script("study")
@@ -291,6 +293,7 @@ def test_a_single_seed_gives_no_interval_and_no_verdict(tmp_path: Path) -> None:
     )
 
 
+@pytest.mark.slow
 def test_an_interim_look_on_the_seeds_every_run_is_in(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     study_module = load_script("study")
     path, root = write_study(tmp_path, {env: [3.0, 4.0, 5.0, 6.0] for env in ENVS})
