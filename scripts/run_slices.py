@@ -25,8 +25,9 @@ Usage::
     python scripts/run_slices.py unpack OUT/bundle*.tar --root results/raw
     python scripts/benchmark.py --study benchmarks/minatar.yml --workers 2
 
-``OUT/slices.log`` records the machine (CPU, Python and library versions, commit), the runs' progress when they were
-stopped and what was packed; ``OUT/slice<i>.log`` is the output of slice ``i``.
+``OUT/slices.log`` records the machine (CPU, Python and library versions, commit), the slices' commands, when they were
+stopped, and the step each run's newest checkpoint had reached, packed or left out; ``OUT/slice<i>.log`` is the
+output of slice ``i``.
 """
 
 import argparse
