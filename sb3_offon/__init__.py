@@ -13,6 +13,11 @@ from sb3_offon.common.buffers import (
     OffOnReplayBuffer,
     OffOnReplayBufferSamples,
 )
+from sb3_offon.common.prioritized_buffers import (
+    PrioritizedOffOnDictReplayBuffer,
+    PrioritizedOffOnNStepReplayBuffer,
+    PrioritizedOffOnReplayBuffer,
+)
 from sb3_offon.offon_dqn import CnnPolicy, MlpPolicy, MultiInputPolicy, OffOnDQN
 from sb3_offon.offon_qrdqn import OffOnQRDQN
 from sb3_offon.presets import LAMBDA_CHOICE_TARGETS, PAPER_TARGETS
@@ -38,4 +43,7 @@ __all__ = [
     "OffOnQRDQN",
     "OffOnReplayBuffer",
     "OffOnReplayBufferSamples",
+    "PrioritizedOffOnDictReplayBuffer",
+    "PrioritizedOffOnNStepReplayBuffer",
+    "PrioritizedOffOnReplayBuffer",
 ]

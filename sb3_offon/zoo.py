@@ -39,6 +39,7 @@ from stable_baselines3.common.callbacks import EvalCallback
 # Registers CartPoleFallPenalty-v1 and MountainCarGoalBonus-v0 (also done by ``import sb3_offon``)
 import sb3_offon.envs  # noqa: F401
 from sb3_offon.common.offon_model import MC_TRUNCATION_OPTIONS
+from sb3_offon.common.prioritized_buffers import PRIORITIZED_BUFFERS
 from sb3_offon.offon_dqn import OffOnDQN
 from sb3_offon.offon_dqn.offon_dqn import LOSS_FUNCTIONS, MC_MIXING_OPTIONS, SARSA_TARGET_OPTIONS
 from sb3_offon.offon_qrdqn import OffOnQRDQN
@@ -440,3 +441,6 @@ def register() -> None:
     # The zoo evaluates a YAML file's `policy_kwargs` string in the namespace of its exp_manager module (which has
     # `th` and `nn`): the MinAtar entries' "dict(features_extractor_class=MinAtarCNN, ...)" finds the class there
     zoo_exp_manager.MinAtarCNN = MinAtarCNN  # type: ignore[attr-defined]
+    # Likewise a `replay_buffer_class` given by name (``--hyperparams replay_buffer_class:PrioritizedOffOnReplayBuffer``)
+    for buffer_class in PRIORITIZED_BUFFERS:
+        setattr(zoo_exp_manager, buffer_class.__name__, buffer_class)

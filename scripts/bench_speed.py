@@ -32,6 +32,7 @@ Usage:
     python scripts/bench_speed.py --env MinAtar/Breakout-v0 --mode defaults --train-freq 1 --timesteps 15000 --prefill 5000
     python scripts/bench_speed.py --env LunarLander-v3 --mode double_q --baseline offon_defaults
     python scripts/bench_speed.py --env MinAtar/Breakout-v0 --candidate offon_qrdqn --prefill 10000 --flush-denormals
+    python scripts/bench_speed.py --env LunarLander-v3 --mode per --baseline offon_defaults
 
 ``--env AtariShaped`` is an Atari-shaped task made up on the spot (4 stacked 84x84 uint8 frames, episodes of 200 steps
 that end by termination, CnnPolicy, the zoo's Atari DQN settings with a smaller buffer), so that CNNs can be measured,
@@ -60,7 +61,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.envs import FakeImageEnv
 
 import sb3_offon
-from sb3_offon import PAPER_TARGETS, MinAtarCNN, OffOnDQN, OffOnQRDQN
+from sb3_offon import PAPER_TARGETS, MinAtarCNN, OffOnDQN, OffOnQRDQN, PrioritizedOffOnReplayBuffer
 from sb3_offon.offon_dqn.offon_dqn import OFFON_PARAMETERS
 from sb3_offon.qrdqn import QRDQN
 
@@ -139,6 +140,7 @@ MODES = {
     "lambda": LAMBDA_TARGETS,
     "double_q": dict(double_q=True),
     "projected": dict(lambda_form="projected"),  # OffOnQRDQN only
+    "per": dict(replay_buffer_class=PrioritizedOffOnReplayBuffer),  # prioritised replay, Rainbow's alpha 0.5, beta 0.4
 }
 # --candidate: the class of the "OffOnDQN" runs, and the baseline it is measured against unless --baseline says
 CANDIDATES: dict[str, tuple[type, str]] = {"offon_dqn": (OffOnDQN, "dqn"), "offon_qrdqn": (OffOnQRDQN, "qrdqn")}
@@ -149,12 +151,14 @@ BASELINES: dict[str, tuple[type[DQN], dict]] = {
     "dqn_nstep": (DQN, dict(n_steps=10)),
     "offon_defaults": (OffOnDQN, {}),
     "qrdqn": (QRDQN, {}),
+    "offon_qrdqn_defaults": (OffOnQRDQN, {}),
 }
 BASELINE_NAMES = {
     "dqn": "SB3's DQN",
     "dqn_nstep": "SB3's DQN with n_steps=10 (n-step DQN)",
     "offon_defaults": "OffOnDQN with its defaults",
     "qrdqn": "sb3_offon.qrdqn.QRDQN (QR-DQN)",
+    "offon_qrdqn_defaults": "OffOnQRDQN with its defaults",
 }
 ZOO_TIMESTEPS = {"CartPole-v1": 50_000, "LunarLander-v3": 100_000, ATARI_SHAPED: 10_000_000, MINATAR_BREAKOUT: 1_000_000}
 POLICIES = {"CartPole-v1": "MlpPolicy", "LunarLander-v3": "MlpPolicy", ATARI_SHAPED: "CnnPolicy"}

@@ -35,30 +35,12 @@ class QuantileHuberLoss(th.autograd.Function):
 
     @staticmethod
     def forward(ctx: Any, current_quantiles: th.Tensor, target_quantiles: th.Tensor) -> th.Tensor:
-        batch_size, n_quantiles = current_quantiles.shape
+        batch_size, _ = current_quantiles.shape
         n_targets = target_quantiles.shape[-1]
-        theta = current_quantiles.detach().double().contiguous()  # searchsorted copies (and warns) otherwise
-        targets = target_quantiles.detach().double().sort(dim=-1).values.contiguous()
-        zeros = targets.new_zeros(batch_size, 1)
-        sums = th.cat([zeros, targets.cumsum(dim=-1)], dim=-1)  # sums[:, k]: the k smallest targets' sum
-        squares = th.cat([zeros, targets.square().cumsum(dim=-1)], dim=-1)
-        fractions = (th.arange(n_quantiles, device=theta.device, dtype=th.float64) + 0.5) / n_quantiles
-
-        # How many targets lie below theta - 1, below theta, and at or below theta + 1
-        k_a = th.searchsorted(targets, theta - 1.0, side="left")
-        k_b = th.searchsorted(targets, theta, side="left")
-        k_c = th.searchsorted(targets, theta + 1.0, side="right")
-        sum_a, sum_b, sum_c = sums.gather(-1, k_a), sums.gather(-1, k_b), sums.gather(-1, k_c)
-        square_a, square_b, square_c = squares.gather(-1, k_a), squares.gather(-1, k_b), squares.gather(-1, k_c)
-        n_a, n_b, n_c, n_d = k_a.double(), (k_b - k_a).double(), (k_c - k_b).double(), (n_targets - k_c).double()
-        s1_b, s1_c, s1_d = sum_b - sum_a, sum_c - sum_b, sums[:, -1:] - sum_c
-        s2_b, s2_c = square_b - square_a, square_c - square_b
-
-        below = n_a * (theta - 0.5) - sum_a + 0.5 * (s2_b - 2.0 * theta * s1_b + n_b * theta.square())
-        above = 0.5 * (s2_c - 2.0 * theta * s1_c + n_c * theta.square()) + s1_d - n_d * (theta + 0.5)
+        costs, slopes = _quantile_costs_and_slopes(current_quantiles, target_quantiles)
         scale = batch_size * n_targets
-        loss = ((1.0 - fractions) * below + fractions * above).sum() / scale
-        gradient = ((1.0 - fractions) * (n_a - s1_b + n_b * theta) - fractions * (s1_c - n_c * theta + n_d)) / scale
+        loss = costs.sum() / scale
+        gradient = slopes / scale
         ctx.save_for_backward(gradient.to(current_quantiles.dtype))
         return loss.to(current_quantiles.dtype)
 
@@ -66,6 +48,67 @@ class QuantileHuberLoss(th.autograd.Function):
     def backward(ctx: Any, grad_output: th.Tensor) -> tuple[th.Tensor, None]:
         (gradient,) = ctx.saved_tensors
         return grad_output * gradient, None
+
+
+def _quantile_costs_and_slopes(current_quantiles: th.Tensor, target_quantiles: th.Tensor) -> tuple[th.Tensor, th.Tensor]:
+    """
+    Per sample and current quantile (batch_size, n_quantiles), in float64: the quantile Huber cost summed over the
+    targets, and its derivative with respect to the current quantile (see :class:`QuantileHuberLoss`).
+    """
+    batch_size, n_quantiles = current_quantiles.shape
+    n_targets = target_quantiles.shape[-1]
+    theta = current_quantiles.detach().double().contiguous()  # searchsorted copies (and warns) otherwise
+    targets = target_quantiles.detach().double().sort(dim=-1).values.contiguous()
+    zeros = targets.new_zeros(batch_size, 1)
+    sums = th.cat([zeros, targets.cumsum(dim=-1)], dim=-1)  # sums[:, k]: the k smallest targets' sum
+    squares = th.cat([zeros, targets.square().cumsum(dim=-1)], dim=-1)
+    fractions = (th.arange(n_quantiles, device=theta.device, dtype=th.float64) + 0.5) / n_quantiles
+
+    # How many targets lie below theta - 1, below theta, and at or below theta + 1
+    k_a = th.searchsorted(targets, theta - 1.0, side="left")
+    k_b = th.searchsorted(targets, theta, side="left")
+    k_c = th.searchsorted(targets, theta + 1.0, side="right")
+    sum_a, sum_b, sum_c = sums.gather(-1, k_a), sums.gather(-1, k_b), sums.gather(-1, k_c)
+    square_a, square_b, square_c = squares.gather(-1, k_a), squares.gather(-1, k_b), squares.gather(-1, k_c)
+    n_a, n_b, n_c, n_d = k_a.double(), (k_b - k_a).double(), (k_c - k_b).double(), (n_targets - k_c).double()
+    s1_b, s1_c, s1_d = sum_b - sum_a, sum_c - sum_b, sums[:, -1:] - sum_c
+    s2_b, s2_c = square_b - square_a, square_c - square_b
+
+    below = n_a * (theta - 0.5) - sum_a + 0.5 * (s2_b - 2.0 * theta * s1_b + n_b * theta.square())
+    above = 0.5 * (s2_c - 2.0 * theta * s1_c + n_c * theta.square()) + s1_d - n_d * (theta + 0.5)
+    costs = (1.0 - fractions) * below + fractions * above
+    slopes = (1.0 - fractions) * (n_a - s1_b + n_b * theta) - fractions * (s1_c - n_c * theta + n_d)
+    return costs, slopes
+
+
+class WeightedQuantileHuberLoss(th.autograd.Function):
+    """
+    QR-DQN's quantile Huber loss with a weight per sample (prioritised replay's importance weights): the mean over the
+    batch of weight x (the sample's cost summed over the current quantiles, averaged over the targets). With unit
+    weights, the value and gradient of :class:`QuantileHuberLoss`.
+    """
+
+    @staticmethod
+    def forward(ctx: Any, current_quantiles: th.Tensor, target_quantiles: th.Tensor, weights: th.Tensor) -> th.Tensor:
+        batch_size, _ = current_quantiles.shape
+        n_targets = target_quantiles.shape[-1]
+        costs, slopes = _quantile_costs_and_slopes(current_quantiles, target_quantiles)
+        weights = weights.detach().double().reshape(-1, 1)
+        scale = batch_size * n_targets
+        ctx.save_for_backward((weights * slopes / scale).to(current_quantiles.dtype))
+        return ((weights * costs).sum() / scale).to(current_quantiles.dtype)
+
+    @staticmethod
+    def backward(ctx: Any, grad_output: th.Tensor) -> tuple[th.Tensor, None, None]:
+        (gradient,) = ctx.saved_tensors
+        return grad_output * gradient, None, None
+
+
+def per_sample_quantile_huber_loss(current_quantiles: th.Tensor, target_quantiles: th.Tensor) -> th.Tensor:
+    """Each sample's quantile Huber loss (summed over the current quantiles, averaged over the targets), no gradient."""
+    with th.no_grad():
+        costs, _ = _quantile_costs_and_slopes(current_quantiles, target_quantiles)
+        return (costs.sum(dim=1) / target_quantiles.shape[-1]).to(current_quantiles.dtype)
 
 
 def quantile_huber_loss(

@@ -13,6 +13,7 @@ from stable_baselines3.common.vec_env import VecNormalize
 from stable_baselines3.dqn.policies import QNetwork
 
 from sb3_offon.common.buffers import OffOnDictReplayBufferSamples, OffOnReplayBufferSamples
+from sb3_offon.common.prioritized_buffers import PrioritizedBufferMixin
 from sb3_offon.offon_dqn.chunks import rows_of
 
 Samples = OffOnReplayBufferSamples | OffOnDictReplayBufferSamples
@@ -40,7 +41,7 @@ class CoinFlipTargetsMixin:
     _update_learning_rate: Callable[..., None]
     _steps_per_chunk: Callable[[int], int]
     _to_device: Callable[[np.ndarray], th.Tensor]
-    _loss_fn: Callable[[], Callable[[th.Tensor, th.Tensor], th.Tensor]]
+    _loss_fn: Callable[[], Callable[..., th.Tensor]]
     _bootstrap: Callable[[Any], tuple[th.Tensor, th.Tensor, th.Tensor]]
     _online_greedy_actions: Callable[[Any], th.Tensor]
     _parameter_list: Callable[[], list[th.nn.Parameter]]
@@ -61,13 +62,25 @@ class CoinFlipTargetsMixin:
         targets_per_step = self.sarsa_target == "expected" and self.qlearning_prob < 1.0
         # Listed once (not by walking the policy's modules at each step, as SB3's DQN does): the same clipping
         parameters = self._parameter_list()
+        # Prioritised replay: the call's minibatches are drawn with the priorities as they are at its start, and the
+        # errors of its gradient steps update them once, at its end (one read from the device per call)
+        prioritized = isinstance(self.replay_buffer, PrioritizedBufferMixin)
+        drawn_slots, drawn_envs, errors = [], [], []
         losses, q_taken, mc_returns, bound_active = [], [], [], []
         n_mc_targets = n_sarsa_targets = 0
         steps_per_chunk = self._steps_per_chunk(batch_size)
         for first_step in range(0, gradient_steps, steps_per_chunk):
             n_steps = min(steps_per_chunk, gradient_steps - first_step)
             chunk = slice(first_step * batch_size, (first_step + n_steps) * batch_size)
-            batches = self.replay_buffer.sample_minibatches(n_steps, batch_size, env=self._vec_normalize_env)
+            if prioritized:
+                batches, slots, envs, weights = self.replay_buffer.sample_prioritized(
+                    n_steps, batch_size, env=self._vec_normalize_env
+                )
+                drawn_slots.append(slots)
+                drawn_envs.append(envs)
+                weights_tensor = self._to_device(weights.reshape(-1, 1))
+            else:
+                batches = self.replay_buffer.sample_minibatches(n_steps, batch_size, env=self._vec_normalize_env)
             data = batches.samples
             use_mc, use_sarsa = self._target_choice(
                 batches.mc_returns, batches.next_actions, mc_drawn[chunk], sarsa_drawn[chunk]
@@ -92,7 +105,12 @@ class CoinFlipTargetsMixin:
 
                 current_q_values = self.q_net(rows_of(data.observations, rows))
                 current_q_values = th.gather(current_q_values, dim=1, index=data.actions[rows].long())
-                loss = loss_fn(current_q_values, step_targets)
+                if prioritized:
+                    # Each sample's loss weighted by its importance weight (Schaul et al. 2016)
+                    loss = (loss_fn(current_q_values, step_targets, reduction="none") * weights_tensor[rows]).mean()
+                    errors.append((step_targets - current_q_values).detach())
+                else:
+                    loss = loss_fn(current_q_values, step_targets)
 
                 self.policy.optimizer.zero_grad()
                 loss.backward()
@@ -106,6 +124,10 @@ class CoinFlipTargetsMixin:
 
         self._n_updates += gradient_steps
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
+        if prioritized:
+            self.replay_buffer.update_priorities(
+                np.concatenate(drawn_slots), np.concatenate(drawn_envs), th.cat(errors).cpu().numpy()
+            )
         self._record_target_statistics(
             th.stack(losses), th.cat(q_taken), th.cat(mc_returns), n_mc_targets, n_sarsa_targets, bound_active
         )

@@ -100,6 +100,8 @@ class LambdaReturnCache:
     trace_cut_fraction: float
     whole_buffer: bool = False
     order: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    # Prioritised replay: a sum tree over the entries (their transitions' priorities), built at the first draw
+    tree: Any = None
     cursor: int = 0
     _newest_added_at: int | None = None
 

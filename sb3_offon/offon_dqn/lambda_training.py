@@ -19,6 +19,8 @@ from stable_baselines3.common.vec_env import VecNormalize
 from stable_baselines3.dqn.policies import QNetwork
 
 from sb3_offon.common.buffers import OffOnBufferMixin
+from sb3_offon.common.prioritized_buffers import PrioritizedBufferMixin
+from sb3_offon.common.sum_tree import SumTree
 from sb3_offon.offon_dqn.chunks import rows_of
 from sb3_offon.offon_dqn.lambda_returns import LambdaReturnCache, compute_lambda_returns
 
@@ -89,6 +91,45 @@ class LambdaRefreshMixin:
             entries = cache.draw(n_samples, self.replay_buffer)
             assert entries is not None
         return cache, entries
+
+    def _draw_prioritized_lambda_entries(self, n_samples: int) -> tuple[LambdaReturnCache, np.ndarray, np.ndarray]:
+        """
+        With prioritised replay: the cache (refreshed first if due) and ``n_samples`` of its entries drawn in proportion
+        to their transitions' priorities (p^alpha, as the buffer's tree holds them: new transitions at the highest so
+        far), with replacement, and their importance weights (N P(i))^-beta / max: P(i) the entry's probability among
+        the cache's live entries, N their number, the maximum over them. Entries whose transition was overwritten since
+        the refresh get probability 0; when none is left the cache is computed afresh.
+
+        Which transitions a refresh computes is decided as without prioritisation (blocks picked uniformly): every
+        stored transition keeps its chance of a fresh return, and the priorities decide which returns are trained on.
+        """
+        buffer = self.replay_buffer
+        assert isinstance(buffer, PrioritizedBufferMixin)
+        for _ in range(2):
+            cache = self._refreshed_lambda_cache(n_samples)
+            if cache.tree is None:
+                cache.tree = SumTree(len(cache))
+                cache.tree.update(np.arange(len(cache)), buffer.tree.values(buffer.leaves(cache.slots, cache.envs)))
+            gone = np.flatnonzero(~buffer.holds_transition(cache.added_at))
+            if len(gone):
+                cache.tree.update(gone, np.zeros(len(gone)))
+            if cache.tree.total > 0:
+                break
+            self._lambda_cache = None  # everything cached was overwritten since the refresh: compute afresh
+        rng = np.random.default_rng(np.random.randint(2**31))  # from NumPy's global generator, which SB3 seeds
+        entries = cache.tree.sample(n_samples, rng)
+        probabilities = cache.tree.probabilities(entries)
+        smallest = cache.tree.min / cache.tree.total
+        return cache, entries, ((probabilities / smallest) ** -buffer.beta).astype(np.float32)
+
+    def _update_lambda_priorities(self, cache: LambdaReturnCache, entries: np.ndarray, errors: np.ndarray) -> None:
+        """New priorities |error| + epsilon for the trained entries: in the buffer's tree and the cache's."""
+        buffer = self.replay_buffer
+        assert isinstance(buffer, PrioritizedBufferMixin) and cache.tree is not None
+        buffer.update_priorities(cache.slots[entries], cache.envs[entries], errors)
+        live = buffer.holds_transition(cache.added_at[entries])  # overwritten during the call: stays at 0
+        priorities = np.abs(errors.reshape(-1)) + buffer.epsilon
+        cache.tree.update(entries[live], np.power(priorities[live], buffer.alpha))
 
     def _lambda_samples_per_refresh(self) -> int:
         """
@@ -169,7 +210,7 @@ class LambdaTrainingMixin(LambdaRefreshMixin):
     _steps_per_chunk: Callable[[int], int]
     _observation_bytes: Callable[[], int]
     _to_device: Callable[[np.ndarray], th.Tensor]
-    _loss_fn: Callable[[], Callable[[th.Tensor, th.Tensor], th.Tensor]]
+    _loss_fn: Callable[[], Callable[..., th.Tensor]]
     _bootstrap: Callable[[Any], tuple[th.Tensor, th.Tensor, th.Tensor]]
     _parameter_list: Callable[[], list[th.nn.Parameter]]
 
@@ -184,24 +225,36 @@ class LambdaTrainingMixin(LambdaRefreshMixin):
         self.policy.set_training_mode(True)
         self._update_learning_rate(self.policy.optimizer)
         loss_fn = self._loss_fn()
-        cache, entries = self._draw_lambda_entries(gradient_steps * batch_size)
+        prioritized = isinstance(self.replay_buffer, PrioritizedBufferMixin)
+        if prioritized:
+            cache, entries, weights = self._draw_prioritized_lambda_entries(gradient_steps * batch_size)
+        else:
+            cache, entries = self._draw_lambda_entries(gradient_steps * batch_size)
+        errors = []
         parameters = self._parameter_list()
         losses = []
         steps_per_chunk = self._steps_per_chunk(batch_size)
         for first_step in range(0, gradient_steps, steps_per_chunk):
             n_steps = min(steps_per_chunk, gradient_steps - first_step)
-            chunk = entries[first_step * batch_size : (first_step + n_steps) * batch_size]
+            positions = slice(first_step * batch_size, (first_step + n_steps) * batch_size)
+            chunk = entries[positions]
             observations, actions = self.replay_buffer.observations_and_actions(
                 cache.slots[chunk], cache.envs[chunk], self._vec_normalize_env
             )
             observations_tensor = obs_as_tensor(observations, self.device)
             actions_tensor = self._to_device(actions).long()
             targets = self._to_device(cache.returns[chunk].reshape(-1, 1))
+            if prioritized:
+                weights_tensor = self._to_device(weights[positions].reshape(-1, 1))
             for step in range(n_steps):
                 rows = slice(step * batch_size, (step + 1) * batch_size)
                 current_q_values = self.q_net(rows_of(observations_tensor, rows))
                 current_q_values = th.gather(current_q_values, dim=1, index=actions_tensor[rows])
-                loss = loss_fn(current_q_values, targets[rows])
+                if prioritized:
+                    loss = (loss_fn(current_q_values, targets[rows], reduction="none") * weights_tensor[rows]).mean()
+                    errors.append((targets[rows] - current_q_values).detach())
+                else:
+                    loss = loss_fn(current_q_values, targets[rows])
 
                 self.policy.optimizer.zero_grad()
                 loss.backward()
@@ -211,6 +264,8 @@ class LambdaTrainingMixin(LambdaRefreshMixin):
 
         self._n_updates += gradient_steps
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
+        if prioritized:
+            self._update_lambda_priorities(cache, entries, th.cat(errors).cpu().numpy())
         self.logger.record("train/loss", th.stack(losses).mean().item())
         self.logger.record("train/lambda", cache.lam)
         self.logger.record("train/trace_cut_fraction", cache.trace_cut_fraction)

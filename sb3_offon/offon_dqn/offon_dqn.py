@@ -16,6 +16,7 @@ from sb3_offon.common.buffers import (
     reward_scale,
 )
 from sb3_offon.common.offon_model import OffOnReplayMixin, check_lambda_arguments, check_option
+from sb3_offon.common.prioritized_buffers import PrioritizedBufferMixin
 from sb3_offon.offon_dqn.chunks import ChunkedMinibatchesMixin
 from sb3_offon.offon_dqn.coin_flip_targets import CoinFlipTargetsMixin
 from sb3_offon.offon_dqn.lambda_returns import LambdaReturnCache
@@ -431,6 +432,9 @@ class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, ChunkedMinibatchesMixi
         self.qlearning_prob = self.qlearning_schedule(self._current_progress_remaining)
         self.logger.record("train/mc_prob", self.mc_prob)
         self.logger.record("train/qlearning_prob", self.qlearning_prob)
+        if isinstance(self.replay_buffer, PrioritizedBufferMixin):
+            self.replay_buffer.anneal_beta(self._current_progress_remaining)
+            self.logger.record("train/per_beta", self.replay_buffer.beta)
         if not isinstance(self.replay_buffer, OffOnBufferMixin):
             super().train(gradient_steps, batch_size)
             return

@@ -10,7 +10,8 @@ from stable_baselines3.common.utils import LinearSchedule, obs_as_tensor
 
 from sb3_offon.common.buffers import OffOnBufferMixin
 from sb3_offon.common.offon_model import OffOnReplayMixin, check_lambda_arguments, check_option
-from sb3_offon.common.quantile_loss import quantile_huber_loss
+from sb3_offon.common.prioritized_buffers import PrioritizedBufferMixin
+from sb3_offon.common.quantile_loss import WeightedQuantileHuberLoss, per_sample_quantile_huber_loss, quantile_huber_loss
 from sb3_offon.offon_dqn.chunks import ChunkedMinibatchesMixin, rows_of
 from sb3_offon.offon_dqn.lambda_returns import LambdaReturnCache
 from sb3_offon.offon_dqn.lambda_training import LambdaRefreshMixin
@@ -323,23 +324,37 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
         self.logger.record("train/qlearning_prob", self.qlearning_prob)
         self.policy.set_training_mode(True)
         self._update_learning_rate(self.policy.optimizer)
-        cache, entries = self._draw_lambda_entries(gradient_steps * batch_size)
+        prioritized = isinstance(self.replay_buffer, PrioritizedBufferMixin)
+        if prioritized:
+            self.replay_buffer.anneal_beta(self._current_progress_remaining)
+            self.logger.record("train/per_beta", self.replay_buffer.beta)
+            cache, entries, weights = self._draw_prioritized_lambda_entries(gradient_steps * batch_size)
+        else:
+            cache, entries = self._draw_lambda_entries(gradient_steps * batch_size)
         parameters = list(self.policy.parameters())
-        losses = []
+        losses, errors = [], []
         for first_step in range(0, gradient_steps, self._steps_per_chunk(batch_size)):
             n_steps = min(self._steps_per_chunk(batch_size), gradient_steps - first_step)
-            chunk = entries[first_step * batch_size : (first_step + n_steps) * batch_size]
+            positions = slice(first_step * batch_size, (first_step + n_steps) * batch_size)
+            chunk = entries[positions]
             observations, actions = self.replay_buffer.observations_and_actions(
                 cache.slots[chunk], cache.envs[chunk], self._vec_normalize_env
             )
             observations_tensor = obs_as_tensor(observations, self.device)
             actions_tensor = self._to_device(actions.reshape(-1, 1, 1)).long().expand(-1, self.n_quantiles, 1)
             targets = self._to_device(cache.returns[chunk])
+            if prioritized:
+                weights_tensor = self._to_device(weights[positions])
             for step in range(n_steps):
                 rows = slice(step * batch_size, (step + 1) * batch_size)
                 current_quantiles = self.quantile_net(rows_of(observations_tensor, rows))
                 current_quantiles = th.gather(current_quantiles, dim=2, index=actions_tensor[rows]).squeeze(dim=2)
-                loss = quantile_huber_loss(current_quantiles, targets[rows], sum_over_quantiles=True)
+                if prioritized:
+                    # Importance-weighted; each sample's loss is its new priority (as Rainbow's per-sample KL)
+                    loss = WeightedQuantileHuberLoss.apply(current_quantiles, targets[rows], weights_tensor[rows])
+                    errors.append(per_sample_quantile_huber_loss(current_quantiles, targets[rows]))
+                else:
+                    loss = quantile_huber_loss(current_quantiles, targets[rows], sum_over_quantiles=True)
 
                 self.policy.optimizer.zero_grad()
                 loss.backward()
@@ -350,6 +365,8 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
 
         self._n_updates += gradient_steps
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
+        if prioritized:
+            self._update_lambda_priorities(cache, entries, th.cat(errors).cpu().numpy())
         self.logger.record("train/loss", th.stack(losses).mean().item())
         self.logger.record("train/lambda", cache.lam)
         self.logger.record("train/trace_cut_fraction", cache.trace_cut_fraction)
