@@ -257,4 +257,4 @@ def test_pickle_and_copy_round_trip() -> None:
         )
         clone.update(np.array([0]), np.array([100.0]))  # the clone owns its arrays
         assert tree.total == 20.0
-    assert all(type(value) in (int, np.ndarray) for value in vars(tree).values())
+    assert all(type(value) in (int, float, np.ndarray) for value in vars(tree).values())

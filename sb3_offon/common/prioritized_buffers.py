@@ -56,8 +56,8 @@ class PrioritizedBufferMixin(OffOnBufferMixin):
     initial_beta: float
     final_beta: float
     epsilon: float
-    tree: SumTree
     max_priority: float
+    _tree: SumTree
 
     def _init_prioritized(self, alpha: float, beta: float, final_beta: float, epsilon: float) -> None:
         for name, value, low, high in (
@@ -74,14 +74,31 @@ class PrioritizedBufferMixin(OffOnBufferMixin):
             raise ValueError("`optimize_memory_usage` is not supported with prioritised replay")
         self.alpha, self.epsilon = float(alpha), float(epsilon)
         self.initial_beta, self.beta, self.final_beta = float(beta), float(beta), float(final_beta)
-        self.tree = SumTree(self.buffer_size * self.n_envs)
+        self._tree = SumTree(self.buffer_size * self.n_envs)
         self.max_priority = 1.0
+        # Leaf values set since the tree was last brought up to date: applied in one update when it is read, so that
+        # adding a transition (each env step) and a training call's new priorities cost no tree update of their own
+        self._pending: list[tuple[np.ndarray, np.ndarray]] = []
+
+    @property
+    def tree(self) -> SumTree:
+        """The sum tree of the priorities (p^alpha per transition), up to date."""
+        if self._pending:
+            leaves, values = (np.concatenate(parts) for parts in zip(*self._pending, strict=True))
+            self._pending = []
+            self._tree.update(leaves, values)  # in the order they were set: the last value of a leaf wins
+        return self._tree
 
     def reset(self) -> None:
         super().reset()
-        if hasattr(self, "tree"):
-            self.tree = SumTree(self.buffer_size * self.n_envs)
+        if hasattr(self, "_tree"):
+            self._tree = SumTree(self.buffer_size * self.n_envs)
+            self._pending = []
             self.max_priority = 1.0
+
+    def __getstate__(self) -> dict[str, Any]:
+        self.tree  # noqa: B018  (brings the tree up to date, so that what is saved is)
+        return super().__getstate__()
 
     def anneal_beta(self, progress_remaining: float) -> None:
         """Set :attr:`beta` from the training's progress (1 at the start, 0 at the end): linear to ``final_beta``."""
@@ -96,7 +113,7 @@ class PrioritizedBufferMixin(OffOnBufferMixin):
         super().add(*args, **kwargs)
         # The new transitions (one per env column) at the highest priority so far
         new = self.leaves(np.full(self.n_envs, slot), np.arange(self.n_envs))
-        self.tree.update(new, np.full(self.n_envs, self._leaf_value(self.max_priority)))
+        self._pending.append((new, np.full(self.n_envs, self._leaf_value(self.max_priority))))
 
     def _leaf_value(self, priority: float | np.ndarray) -> Any:
         return np.power(priority, self.alpha)
@@ -113,7 +130,7 @@ class PrioritizedBufferMixin(OffOnBufferMixin):
         if not np.all(np.isfinite(priorities)):
             raise ValueError("prioritised replay: a non-finite error (NaN or inf) cannot be a priority")
         self.max_priority = max(self.max_priority, float(priorities.max(initial=0.0)))
-        self.tree.update(self.leaves(slots, envs), self._leaf_value(priorities))
+        self._pending.append((self.leaves(slots, envs), self._leaf_value(priorities)))
 
     def n_transitions(self) -> int:
         """How many transitions are stored (all env columns)."""
@@ -134,7 +151,8 @@ class PrioritizedBufferMixin(OffOnBufferMixin):
     def weights(self, probabilities: np.ndarray) -> np.ndarray:
         """(N P(i))^-beta, divided by its largest value over the stored transitions (that of the smallest priority)."""
         n_stored = self.n_transitions()
-        smallest = self.tree.min / self.tree.total
+        tree = self.tree
+        smallest = tree.min / tree.total
         return ((probabilities / smallest) ** -self.beta).astype(np.float32) if n_stored else np.ones(0, np.float32)
 
     def sample_prioritized(

@@ -1,28 +1,26 @@
 """
-A sum tree (with a min tree beside it) over a replay buffer's priorities: the data structure that proportional prioritised
+A sum tree over a replay buffer's priorities, with their minimum: the data structure that proportional prioritised
 experience replay samples from (Schaul, Quan, Antonoglou and Silver, "Prioritized Experience Replay", ICLR 2016).
 
 Each of the ``capacity`` leaves holds one transition's priority ``p_i`` (already raised to the power alpha by the
 caller). Transition ``i`` is drawn with probability ``p_i / sum_k p_k``: a value ``u`` uniform in ``[0, total)`` falls in
-leaf ``i`` when ``sum(p[:i]) <= u < sum(p[:i + 1])``, and the tree finds that leaf by descending from the root, going
-left when ``u`` is below the left child's sum and right (less that sum) otherwise. The min tree gives the smallest
-positive priority, from which prioritised replay computes the largest importance-sampling weight that normalises the
-others.
+leaf ``i`` when ``sum(p[:i]) <= u < sum(p[:i + 1])``. The smallest positive priority gives prioritised replay the largest
+importance-sampling weight, which normalises the others.
 
-Layout: the leaves are padded to the next power of two ``P >= capacity``; both trees are flat float64 arrays of
-``2 P - 1`` nodes in 0-based heap order: node 0 is the root, node ``n`` has children ``2 n + 1`` and ``2 n + 2`` and
-parent ``(n - 1) // 2``, and leaf ``i`` is node ``P - 1 + i``. The padded leaves hold 0 in the sum tree and +inf in the
-min tree, so they are never drawn and never the minimum. A leaf set to 0 is treated the same way, as empty: its
-min-tree entry is +inf, because a zero priority marks a slot that holds no transition (or one that must not be drawn),
-not the smallest priority of the stored ones.
+Layout: a tree of two levels, as wide as it is deep is costly in Python. The leaves are cut into ``n_blocks`` blocks of
+``block_size`` (a power of two near the square root of the capacity; the last block padded with zeros), and each
+block's sum and smallest positive leaf are kept. A search takes the running sum over the block sums to find the block,
+then the running sum within that block to find the leaf; an update sets the leaves and recomputes the sums of the
+blocks it touched from their leaves. Each operation is a handful of vectorised NumPy calls for a whole batch, O(batch x
+block_size + n_blocks) work, with no Python loop over samples or levels: on one CPU thread this beats a binary tree's
+level-by-level loop, whose log2(capacity) rounds of small NumPy calls cost more than the arithmetic they save, for
+every buffer size a DQN uses. Block sums are recomputed from their leaves, never adjusted by a leaf's change, so every
+sum is the same function of the leaves whatever the history of updates: no floating-point drift accumulates.
 
-Costs: ``update`` sets a whole batch of leaves and recomputes their ancestors one level at a time; ``find``, ``sample``
-and ``sample_proportional`` descend one level at a time for all values at once. Each is O(batch log capacity) work in
-NumPy, with a Python loop only over the log2(P) levels, and memory is 2 x (2 P - 1) float64s (32 MiB for a million
-transitions). Parents are recomputed from their two children, never adjusted by the change of a leaf, so every node is
-the same function of the leaves whatever the history of updates: no floating-point drift accumulates.
+A leaf set to 0 is empty: it is never drawn and does not count for the minimum, because a zero priority marks a slot
+that holds no transition (or one that must not be drawn), not the smallest priority of the stored ones.
 
-The trees are plain NumPy arrays and ints: the object pickles and copies as it is, with the replay buffer that holds it.
+The arrays are plain NumPy arrays and ints: the object pickles and copies as it is, with the replay buffer that holds it.
 """
 
 from typing import Any
@@ -43,12 +41,14 @@ class SumTree:
         if isinstance(capacity, bool) or not isinstance(capacity, int | np.integer) or capacity < 1:
             raise ValueError(f"The capacity of a SumTree must be a positive integer, got {capacity!r}")
         self.capacity = int(capacity)
-        # Number of leaves once padded to a power of two, so that every leaf is at the same depth
-        self._n_leaves = 1 << (self.capacity - 1).bit_length()
-        self._depth = self._n_leaves.bit_length() - 1
-        self._leaf_offset = self._n_leaves - 1
-        self._sums = np.zeros(2 * self._n_leaves - 1, dtype=np.float64)
-        self._mins = np.full(2 * self._n_leaves - 1, np.inf, dtype=np.float64)
+        # Blocks of a power of two near sqrt(capacity), at least 16 leaves: the two levels' costs balance there
+        self.block_size = max(16, 1 << (int(np.sqrt(self.capacity)) - 1).bit_length())
+        self.n_blocks = -(-self.capacity // self.block_size)
+        self._leaves = np.zeros(self.n_blocks * self.block_size, dtype=np.float64)
+        self._block_sums = np.zeros(self.n_blocks, dtype=np.float64)
+        self._block_mins = np.full(self.n_blocks, np.inf, dtype=np.float64)
+        self._total = 0.0
+        self._min = np.inf
 
     def __len__(self) -> int:
         """
@@ -64,14 +64,14 @@ class SumTree:
         """
         :return: the sum of all priorities
         """
-        return float(self._sums[0])
+        return self._total
 
     @property
     def min(self) -> float:
         """
         :return: the smallest positive priority; +inf if all priorities are 0
         """
-        return float(self._mins[0])
+        return self._min
 
     def _check_indices(self, indices: Any) -> np.ndarray:
         indices = np.asarray(indices)
@@ -92,7 +92,7 @@ class SumTree:
         :param indices: leaf indices in ``[0, capacity)``, any shape
         :return: their priorities (float64, same shape)
         """
-        return self._sums[self._leaf_offset + self._check_indices(indices)]
+        return self._leaves[self._check_indices(indices)]
 
     def probabilities(self, indices: np.ndarray) -> np.ndarray:
         """
@@ -132,22 +132,16 @@ class SumTree:
         if np.any(priorities < 0.0):
             raise ValueError(f"SumTree priorities must be non-negative, got {priorities[priorities < 0.0][:5]}")
 
-        # NumPy does not promise which value of a repeated index a fancy assignment keeps: keep the last explicitly.
-        # np.unique returns the first occurrence of each index in the reversed arrays, the last one in the given order;
-        # its indices come out sorted, which the deduplication of parents below relies on.
+        # NumPy does not promise which value of a repeated index a fancy assignment keeps: keep the last explicitly
+        # (np.unique of the reversed indices returns each one's first occurrence there, its last one in the given order)
         leaves, last = np.unique(indices[::-1], return_index=True)
-        new_priorities = priorities[::-1][last]
-        nodes = leaves + self._leaf_offset
-        self._sums[nodes] = new_priorities
-        self._mins[nodes] = np.where(new_priorities > 0.0, new_priorities, np.inf)
-
-        for _ in range(self._depth):
-            parents = (nodes - 1) >> 1
-            # Sorted nodes have sorted parents: siblings give the same parent side by side
-            nodes = parents[np.concatenate(([True], parents[1:] != parents[:-1]))]
-            left = 2 * nodes + 1
-            self._sums[nodes] = self._sums[left] + self._sums[left + 1]
-            self._mins[nodes] = np.minimum(self._mins[left], self._mins[left + 1])
+        self._leaves[leaves] = priorities[::-1][last]
+        blocks = np.unique(leaves // self.block_size)
+        block_leaves = self._leaves[blocks[:, None] * self.block_size + np.arange(self.block_size)]
+        self._block_sums[blocks] = block_leaves.sum(axis=1)
+        self._block_mins[blocks] = np.where(block_leaves > 0.0, block_leaves, np.inf).min(axis=1)
+        self._total = float(self._block_sums.sum())
+        self._min = float(self._block_mins.min())
 
     def find(self, prefix_sums: np.ndarray) -> np.ndarray:
         """
@@ -170,18 +164,38 @@ class SumTree:
         if np.any(bad):
             raise ValueError(f"SumTree.find needs values in [0, total = {total!r}], got {values[bad][:5]}")
 
-        remaining = values.ravel().copy()
-        nodes = np.zeros(remaining.shape, dtype=np.int64)
-        for _ in range(self._depth):
-            left = 2 * nodes + 1
-            left_sums = self._sums[left]
-            # Go right only into a subtree with some priority: the descent enters only nodes of positive sum (the root
-            # included, as total > 0), so one of the two children is positive and when the right one is 0 the left
-            # one is, and it ends on a positive leaf.
-            go_right = (remaining >= left_sums) & (self._sums[left + 1] > 0.0)
-            remaining = np.where(go_right, remaining - left_sums, remaining)
-            nodes = left + go_right
-        return (nodes - self._leaf_offset).reshape(values.shape)
+        flat = values.ravel()
+        found = np.empty(flat.shape, dtype=np.int64)
+        # In chunks, so that the rows of leaves gathered stay small (a chunk x block_size array)
+        rows_per_chunk = max(1, 2**20 // self.block_size)
+        for start in range(0, len(flat), rows_per_chunk):
+            found[start : start + rows_per_chunk] = self._find(flat[start : start + rows_per_chunk])
+        return found.reshape(values.shape)
+
+    def _find(self, values: np.ndarray) -> np.ndarray:
+        """:meth:`find` for a flat array of checked values."""
+        # The block: the first whose running sum exceeds u. Rounding can take u at or past the last running sum: the
+        # last block with a positive sum is the answer then
+        running = np.cumsum(self._block_sums)
+        blocks = np.searchsorted(running, values, side="right")
+        last_positive_block = int(np.flatnonzero(self._block_sums > 0.0)[-1])
+        blocks = np.minimum(blocks, last_positive_block)
+        # Skip empty blocks that rounding may have stopped at (their running sum equals the previous one's)
+        empty = self._block_sums[blocks] <= 0.0
+        if np.any(empty):
+            positive = np.flatnonzero(self._block_sums > 0.0)
+            blocks[empty] = positive[np.minimum(np.searchsorted(positive, blocks[empty]), len(positive) - 1)]
+        # The leaf: within the block, the first whose running sum exceeds what is left of u. Counting the running sums
+        # at or below it skips the empty leaves (their running sum equals the previous one's); what is left is clipped
+        # at 0, so that rounding below the block's start cannot land on an empty first leaf
+        left = np.maximum(values - (running[blocks] - self._block_sums[blocks]), 0.0)
+        rows = self._leaves[blocks[:, None] * self.block_size + np.arange(self.block_size)]
+        leaves = np.count_nonzero(np.cumsum(rows, axis=1) <= left[:, None], axis=1)
+        # Rounding can also take what is left at or past the block's sum: its last positive leaf is the answer then
+        past = leaves >= self.block_size
+        if np.any(past):
+            leaves[past] = self.block_size - 1 - np.argmax(rows[past][:, ::-1] > 0.0, axis=1)
+        return blocks * self.block_size + leaves
 
     def _check_batch_size(self, batch_size: int) -> float:
         if isinstance(batch_size, bool) or not isinstance(batch_size, int | np.integer) or batch_size < 1:
