@@ -61,7 +61,7 @@ def test_sampling_frequencies_follow_p_to_the_alpha():
     buffer.update_priorities(np.arange(6), np.zeros(6, dtype=int), errors)
     expected = (errors + 1e-6) ** 0.7
     expected /= expected.sum()
-    np.random.seed(0)
+    buffer.rng = np.random.default_rng(0)  # a fixed seed for the draws
     n_draws = 100_000
     slots, envs, _ = buffer.draw(n_draws)
     assert np.all(envs == 0)
@@ -79,7 +79,7 @@ def test_importance_weights_are_hand_computed():
     expected = (4 * probabilities) ** -0.5 / (4 * 1 / 8) ** -0.5
     np.testing.assert_allclose(buffer.weights(probabilities), expected, rtol=1e-6)
     np.testing.assert_allclose(expected, [1.0, 1 / np.sqrt(2), 0.5, 1.0])
-    np.random.seed(1)
+    buffer.rng = np.random.default_rng(1)  # a fixed seed for the draws
     slots, _, weights = buffer.draw(64)
     np.testing.assert_allclose(weights, expected[slots], rtol=1e-6)  # each draw's weight is its probability's
 
@@ -102,7 +102,7 @@ def test_a_wrapped_ring_and_several_envs():
     fill(buffer, 1)  # overwrites slot 0 in both env columns: the new transitions at the highest priority (5)
     np.testing.assert_allclose(buffer.tree.values(buffer.leaves(np.array([0, 0]), np.array([0, 1]))), np.sqrt(5.0 + 1e-6))
     assert buffer.n_transitions() == 8
-    np.random.seed(2)
+    buffer.rng = np.random.default_rng(2)  # a fixed seed for the draws
     slots, envs, _ = buffer.draw(2000)
     assert set(envs.tolist()) == {0, 1} and slots.max() < 4
 
@@ -111,7 +111,7 @@ def test_alpha_zero_is_uniform_with_unit_weights_and_sb3s_samples():
     buffer = make_buffer(buffer_size=16, alpha=0.0)
     fill(buffer, 10)
     buffer.update_priorities(np.arange(10), np.zeros(10, dtype=int), np.linspace(0, 9, 10))
-    np.random.seed(3)
+    buffer.rng = np.random.default_rng(3)  # a fixed seed for the draws
     batches, slots, _, weights = buffer.sample_prioritized(50, 32)
     np.testing.assert_array_equal(weights, 1.0)
     frequencies = np.bincount(slots, minlength=10) / len(slots)
@@ -127,7 +127,7 @@ def test_alpha_zero_is_uniform_with_unit_weights_and_sb3s_samples():
 def test_n_step_samples_are_sb3s_n_step_samples():
     buffer = PrioritizedOffOnNStepReplayBuffer(16, OBS_SPACE, ACTIONS, device="cpu", n_steps=3, gamma=0.5)
     fill(buffer, 11, episode_length=5)
-    np.random.seed(4)
+    buffer.rng = np.random.default_rng(4)  # a fixed seed for the draws
     batches, slots, _, _ = buffer.sample_prioritized(4, 16)
     theirs = NStepReplayBuffer._get_samples(buffer, slots)
     for name in ("observations", "next_observations", "dones", "rewards", "discounts"):
@@ -141,9 +141,7 @@ def test_the_tree_survives_pickling():
     loaded = pickle.loads(pickle.dumps(buffer))
     np.testing.assert_array_equal(loaded.tree.values(np.arange(8)), buffer.tree.values(np.arange(8)))
     assert loaded.max_priority == buffer.max_priority
-    np.random.seed(5)
-    first = buffer.draw(10)
-    np.random.seed(5)
+    first = buffer.draw(10)  # the generator's state was saved with the rest
     second = loaded.draw(10)
     for ours, theirs in zip(first, second, strict=True):
         np.testing.assert_array_equal(ours, theirs)
@@ -203,7 +201,7 @@ def test_the_lambda_cache_samples_by_priority_and_weights_match():
     model = OffOnDQN("MlpPolicy", "CartPole-v1", seed=0, replay_buffer_class=PrioritizedOffOnReplayBuffer, **SMALL)
     model.learn(300)
     buffer = model.replay_buffer
-    np.random.seed(6)
+    buffer.rng = np.random.default_rng(6)
     cache, entries, weights = model._draw_prioritized_lambda_entries(4000)
     priorities = buffer.tree.values(buffer.leaves(cache.slots, cache.envs))
     live = buffer.holds_transition(cache.added_at)

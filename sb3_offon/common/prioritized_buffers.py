@@ -13,9 +13,9 @@ so that a transition's weight is a function of its probability alone, whatever e
 - beta is annealed from ``beta`` to ``final_beta`` (1, the paper's) over training: the algorithm sets
   :attr:`beta` at each training call from its progress.
 - ``alpha=0`` samples uniformly (every p^0 = 1) with unit weights.
-- The samples' draws come from NumPy's global generator (one integer per call seeds the tree's draw), so that a run
-  seeded the SB3 way is reproducible; the tree and the highest priority are saved with the buffer
-  (``save_replay_buffer``, the checkpoints of :mod:`sb3_offon.resume`).
+- The draws come from the buffer's own generator, seeded from NumPy's global one when the buffer is built (SB3 seeds
+  that first), so that a run seeded the SB3 way is reproducible; the generator, the tree and the highest priority are
+  saved with the buffer (``save_replay_buffer``, the checkpoints of :mod:`sb3_offon.resume`).
 
 ``optimize_memory_usage`` is not supported with prioritisation: there the newest slot holds no next observation yet,
 and the tree would have to keep that slot's priority at 0 and restore it one step later.
@@ -79,6 +79,9 @@ class PrioritizedBufferMixin(OffOnBufferMixin):
         # Leaf values set since the tree was last brought up to date: applied in one update when it is read, so that
         # adding a transition (each env step) and a training call's new priorities cost no tree update of their own
         self._pending: list[tuple[np.ndarray, np.ndarray]] = []
+        # The draws' generator, seeded from NumPy's global one (which SB3 seeds before it builds the buffer), saved with
+        # the buffer: a run seeded the SB3 way draws the same samples, and a reloaded buffer draws on
+        self.rng = np.random.default_rng(np.random.randint(2**31))
 
     @property
     def tree(self) -> SumTree:
@@ -143,8 +146,7 @@ class PrioritizedBufferMixin(OffOnBufferMixin):
 
         :return: slots, env columns, weights (float32, at most 1)
         """
-        rng = np.random.default_rng(np.random.randint(2**31))  # from NumPy's global generator, which SB3 seeds
-        leaves = self.tree.sample(n_samples, rng)
+        leaves = self.tree.sample(n_samples, self.rng)
         slots, envs = np.divmod(leaves, self.n_envs)
         return slots, envs, self.weights(self.tree.probabilities(leaves))
 

@@ -49,6 +49,7 @@ class SumTree:
         self._block_mins = np.full(self.n_blocks, np.inf, dtype=np.float64)
         self._total = 0.0
         self._min = np.inf
+        self._last_positive_block = -1
 
     def __len__(self) -> int:
         """
@@ -142,6 +143,8 @@ class SumTree:
         self._block_mins[blocks] = np.where(block_leaves > 0.0, block_leaves, np.inf).min(axis=1)
         self._total = float(self._block_sums.sum())
         self._min = float(self._block_mins.min())
+        positive = np.flatnonzero(self._block_sums > 0.0)
+        self._last_positive_block = int(positive[-1]) if len(positive) else -1
 
     def find(self, prefix_sums: np.ndarray) -> np.ndarray:
         """
@@ -178,8 +181,7 @@ class SumTree:
         # last block with a positive sum is the answer then
         running = np.cumsum(self._block_sums)
         blocks = np.searchsorted(running, values, side="right")
-        last_positive_block = int(np.flatnonzero(self._block_sums > 0.0)[-1])
-        blocks = np.minimum(blocks, last_positive_block)
+        blocks = np.minimum(blocks, self._last_positive_block)
         # Skip empty blocks that rounding may have stopped at (their running sum equals the previous one's)
         empty = self._block_sums[blocks] <= 0.0
         if np.any(empty):
@@ -218,10 +220,9 @@ class SumTree:
         """
         total = self._check_batch_size(batch_size)
         segment = total / batch_size
-        low = np.arange(batch_size, dtype=np.float64) * segment
-        # rng.uniform may return its upper bound by rounding, and the last segment's end may round above total
-        values = np.minimum(rng.uniform(low, low + segment), total)
-        return self.find(values)
+        # The last segment's end may round above total: clipped (the values are in range, _find needs no check)
+        values = np.minimum((np.arange(batch_size, dtype=np.float64) + rng.random(batch_size)) * segment, total)
+        return self._find(values)
 
     def sample_proportional(self, batch_size: int, rng: np.random.Generator) -> np.ndarray:
         """
@@ -233,5 +234,4 @@ class SumTree:
         :return: leaf indices (int64), all of positive priority
         """
         total = self._check_batch_size(batch_size)
-        values = np.minimum(rng.uniform(0.0, total, size=batch_size), total)
-        return self.find(values)
+        return self._find(np.minimum(rng.random(batch_size) * total, total))

@@ -116,8 +116,7 @@ class LambdaRefreshMixin:
             if cache.tree.total > 0:
                 break
             self._lambda_cache = None  # everything cached was overwritten since the refresh: compute afresh
-        rng = np.random.default_rng(np.random.randint(2**31))  # from NumPy's global generator, which SB3 seeds
-        entries = cache.tree.sample(n_samples, rng)
+        entries = cache.tree.sample(n_samples, buffer.rng)
         probabilities = cache.tree.probabilities(entries)
         smallest = cache.tree.min / cache.tree.total
         return cache, entries, ((probabilities / smallest) ** -buffer.beta).astype(np.float32)
