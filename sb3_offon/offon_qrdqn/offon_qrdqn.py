@@ -63,9 +63,9 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
       mixture's quantiles at tau_i = (2i - 1) / 2N, the W1 projection); deterministic, but projecting projected laws,
       and a loop over each block's steps.
 
-    The default is the sampled form: it is exact in expectation and cheaper; the projected form is kept as an option
-    (it costs one function) for comparison. (A setup check on tuning seeds, with its rule written before its runs,
-    compares the two: ``results/qr_lambda_form/README.md``.)
+    The default is the sampled form: exact in expectation and cheaper. A setup check on tuning seeds, its rule written
+    before its runs, found the two level (mean normalised AUC 0.928 against 0.924 over CartPole-v1 and Acrobot-v1,
+    seeds 0-1) and kept the sampled form (``results/qr_lambda_form/README.md``); the projected form stays as an option.
 
     What OffOnQRDQN does not have: OffOnDQN's coin-flip modes (``mc_mixing`` other than ``"lambda"``) and the squared
     error (``loss="mse"``), each a ``ValueError``; ``sarsa_target`` is accepted and plays no part, as in OffOnDQN's
