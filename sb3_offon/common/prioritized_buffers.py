@@ -89,7 +89,8 @@ class PrioritizedBufferMixin(OffOnBufferMixin):
         if self._pending:
             leaves, values = (np.concatenate(parts) for parts in zip(*self._pending, strict=True))
             self._pending = []
-            self._tree.update(leaves, values)  # in the order they were set: the last value of a leaf wins
+            # In the order they were set (the last value of a leaf wins); made here, so no check is needed
+            self._tree.update(leaves, values, check=False)
         return self._tree
 
     def reset(self) -> None:
@@ -132,8 +133,11 @@ class PrioritizedBufferMixin(OffOnBufferMixin):
         priorities = np.abs(np.asarray(errors, dtype=np.float64).reshape(-1)) + self.epsilon
         if not np.all(np.isfinite(priorities)):
             raise ValueError("prioritised replay: a non-finite error (NaN or inf) cannot be a priority")
+        leaves = self.leaves(slots, envs)
+        if len(leaves) != len(priorities) or (len(leaves) and (leaves.min() < 0 or leaves.max() >= len(self._tree))):
+            raise ValueError("prioritised replay: one error per stored transition (slot < buffer_size, env < n_envs)")
         self.max_priority = max(self.max_priority, float(priorities.max(initial=0.0)))
-        self._pending.append((self.leaves(slots, envs), self._leaf_value(priorities)))
+        self._pending.append((leaves, self._leaf_value(priorities)))
 
     def n_transitions(self) -> int:
         """How many transitions are stored (all env columns)."""

@@ -107,9 +107,9 @@ class SumTree:
             raise ValueError("The priorities of the SumTree are all 0: no leaf has a probability")
         return self.values(indices) / total
 
-    def update(self, indices: np.ndarray, priorities: np.ndarray) -> None:
+    def update(self, indices: np.ndarray, priorities: np.ndarray, check: bool = True) -> None:
         """
-        Set the priorities of a batch of leaves, then recompute their ancestors in both trees.
+        Set the priorities of a batch of leaves, then recompute the sums of their blocks.
 
         A priority of 0 empties its leaf: it is never drawn, and it does not count for ``min``.
 
@@ -117,7 +117,12 @@ class SumTree:
             with a loop of single updates
         :param priorities: the new priorities (already raised to the power alpha), finite and non-negative, one per
             index (or one for all)
+        :param check: check the indices and priorities (False: a caller that made them so saves the checks' cost; one
+            priority per index, as int64 and float64 arrays)
         """
+        if not check:
+            self._set(np.asarray(indices).ravel(), np.asarray(priorities, dtype=np.float64).ravel())
+            return
         indices = self._check_indices(indices).ravel()
         priorities = np.asarray(priorities, dtype=np.float64)
         try:
@@ -133,11 +138,18 @@ class SumTree:
         if np.any(priorities < 0.0):
             raise ValueError(f"SumTree priorities must be non-negative, got {priorities[priorities < 0.0][:5]}")
 
+        self._set(indices, priorities)
+
+    def _set(self, indices: np.ndarray, priorities: np.ndarray) -> None:
+        """:meth:`update` of checked, flat indices and priorities of the same length."""
+        if indices.size == 0:
+            return
         # NumPy does not promise which value of a repeated index a fancy assignment keeps: keep the last explicitly
         # (np.unique of the reversed indices returns each one's first occurrence there, its last one in the given order)
         leaves, last = np.unique(indices[::-1], return_index=True)
         self._leaves[leaves] = priorities[::-1][last]
-        blocks = np.unique(leaves // self.block_size)
+        blocks = leaves // self.block_size  # sorted, as the leaves are: each block once
+        blocks = blocks[np.concatenate(([True], blocks[1:] != blocks[:-1]))]
         block_leaves = self._leaves[blocks[:, None] * self.block_size + np.arange(self.block_size)]
         self._block_sums[blocks] = block_leaves.sum(axis=1)
         self._block_mins[blocks] = np.where(block_leaves > 0.0, block_leaves, np.inf).min(axis=1)

@@ -128,7 +128,7 @@ class LambdaRefreshMixin:
         buffer.update_priorities(cache.slots[entries], cache.envs[entries], errors)
         live = buffer.holds_transition(cache.added_at[entries])  # overwritten during the call: stays at 0
         priorities = np.abs(errors.reshape(-1)) + buffer.epsilon
-        cache.tree.update(entries[live], np.power(priorities[live], buffer.alpha))
+        cache.tree.update(entries[live], np.power(priorities[live], buffer.alpha), check=False)
 
     def _lambda_samples_per_refresh(self) -> int:
         """
