@@ -38,6 +38,7 @@ from stable_baselines3.common.callbacks import EvalCallback
 
 # Registers CartPoleFallPenalty-v1 and MountainCarGoalBonus-v0 (also done by ``import sb3_offon``)
 import sb3_offon.envs  # noqa: F401
+from sb3_offon.common.non_finite import NonFiniteCheck, NonFiniteChecksMixin
 from sb3_offon.common.offon_model import MC_TRUNCATION_OPTIONS
 from sb3_offon.common.prioritized_buffers import PRIORITIZED_BUFFERS
 from sb3_offon.offon_dqn import OffOnDQN
@@ -188,8 +189,15 @@ class OffOnExperimentManager(ExperimentManager):
         return next((callback for callback in self.callbacks if isinstance(callback, EvalCallback)), None)
 
     def create_callbacks(self) -> None:
-        """The zoo's callbacks, then (with ``--checkpoint-freq``) a :class:`sb3_offon.resume.RunCheckpoint` after them."""
+        """
+        The zoo's callbacks, then (with ``--checkpoint-freq``) a :class:`sb3_offon.resume.RunCheckpoint` after them; for
+        an algorithm without the package's checks of non-finite rewards and losses (SB3's DQN, the zoo's others), a
+        :class:`sb3_offon.common.non_finite.NonFiniteCheck` before them, so that no checkpoint or best model is written
+        after a non-finite reward or loss.
+        """
         super().create_callbacks()
+        if not issubclass(zoo_utils.ALGOS[self.algo], NonFiniteChecksMixin):
+            self.callbacks.insert(0, NonFiniteCheck())
         if self.checkpoint_freq > 0:
             self.callbacks.append(
                 RunCheckpoint(

@@ -45,6 +45,15 @@ def check_option(name: str, value: Any, options: tuple[str, ...]) -> None:
         raise ValueError(f"`{name}` must be one of {options}, got {value!r}")
 
 
+def check_positive_integer(name: str, value: Any) -> None:
+    """
+    :raises ValueError: naming the parameter, unless ``value`` is an integer of at least 1 (SB3 would make a buffer of
+        one transition from a ``buffer_size`` of 0 or below, and QR-DQN fail at its first gradient step with no quantile)
+    """
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral) or value < 1:
+        raise ValueError(f"`{name}` must be a positive integer, got {value!r}")
+
+
 def check_lambda_arguments(model: Any) -> None:
     """
     Check the arguments that OffOnDQN and OffOnQRDQN share: the delta1 and delta2 schedules, ``mc_truncation``,

@@ -15,7 +15,8 @@ from sb3_offon.common.buffers import (
     OffOnBufferMixin,
     reward_scale,
 )
-from sb3_offon.common.offon_model import OffOnReplayMixin, check_lambda_arguments, check_option
+from sb3_offon.common.non_finite import NON_FINITE_OPTIONS, NonFiniteChecksMixin
+from sb3_offon.common.offon_model import OffOnReplayMixin, check_lambda_arguments, check_option, check_positive_integer
 from sb3_offon.common.prioritized_buffers import PrioritizedBufferMixin
 from sb3_offon.offon_dqn.chunks import ChunkedMinibatchesMixin
 from sb3_offon.offon_dqn.coin_flip_targets import CoinFlipTargetsMixin
@@ -46,7 +47,9 @@ OFFON_PARAMETERS = (
 )
 
 
-class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, DQN):
+class OffOnDQN(
+    NonFiniteChecksMixin, CoinFlipTargetsMixin, LambdaTrainingMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, DQN
+):
     """
     Offline-Online DQN: a DQN whose regression target is drawn, per sample, among the offline Monte-Carlo return
     of the finished episode, the Q-learning target and the Sarsa target.
@@ -211,6 +214,9 @@ class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, ChunkedMinibatchesMixi
         with soft target updates every step (``tau`` < 1), where refreshing at each update would cost most
     :param double_q: double Q-learning in every bootstrap (see above): the online network picks the action, the target
         network values it. Default False (DQN's max over the target network)
+    :param non_finite: what a non-finite reward does: ``"raise"`` (default) a ``NonFiniteError`` naming the env and step,
+        nothing of that step stored; ``"skip"`` a warning, the step's transitions not stored and the running episodes
+        cut there as truncations. A non-finite loss always raises (:mod:`sb3_offon.common.non_finite`)
     :param stats_window_size: Window size for the rollout logging, specifying the number of episodes to average
         the reported success rate, mean episode length, and mean reward over
     :param tensorboard_log: the log location for tensorboard (if None, no logging)
@@ -265,6 +271,7 @@ class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, ChunkedMinibatchesMixi
         lambda_block_size: int = 100,
         lambda_refresh_interval: int | None = None,
         double_q: bool = False,
+        non_finite: str = "raise",
         stats_window_size: int = 100,
         tensorboard_log: str | None = None,
         policy_kwargs: dict[str, Any] | None = None,
@@ -316,6 +323,7 @@ class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, ChunkedMinibatchesMixi
         self.lambda_block_size = lambda_block_size
         self.lambda_refresh_interval = lambda_refresh_interval
         self.double_q = double_q
+        self.non_finite = non_finite
         # The Off-On arguments are checked by _setup_model (which load() also runs); the buffer's discounting here, on
         # the caller's arguments only
         self._check_buffer_discounting()
@@ -330,8 +338,10 @@ class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, ChunkedMinibatchesMixi
 
     def _check_offon_arguments(self) -> None:
         # Run by _setup_model rather than __init__: load()'s kwargs and custom_objects reach the model without __init__
+        check_positive_integer("buffer_size", self.buffer_size)
         check_lambda_arguments(self)
         for name, options in (
+            ("non_finite", NON_FINITE_OPTIONS),
             ("mc_mixing", MC_MIXING_OPTIONS),
             ("sarsa_target", SARSA_TARGET_OPTIONS),
             ("loss", tuple(LOSS_FUNCTIONS)),
@@ -437,12 +447,12 @@ class OffOnDQN(CoinFlipTargetsMixin, LambdaTrainingMixin, ChunkedMinibatchesMixi
             self.logger.record("train/per_beta", self.replay_buffer.beta)
         if not isinstance(self.replay_buffer, OffOnBufferMixin):
             super().train(gradient_steps, batch_size)
-            return
         # Each kind of target has its loop in its own mixin (coin_flip_targets.py, lambda_training.py)
-        if self.mc_mixing == "lambda":
+        elif self.mc_mixing == "lambda":
             self._train_on_lambda_returns(gradient_steps, batch_size)
         else:
             self._train_on_coin_flip_targets(gradient_steps, batch_size)
+        self._check_training_loss()
 
     def _loss_fn(self) -> Any:
         # Looked up at each call, so that a test can swap the function in LOSS_FUNCTIONS

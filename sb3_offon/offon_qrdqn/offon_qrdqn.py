@@ -9,6 +9,7 @@ from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedul
 from stable_baselines3.common.utils import LinearSchedule, obs_as_tensor
 
 from sb3_offon.common.buffers import OffOnBufferMixin
+from sb3_offon.common.non_finite import NON_FINITE_OPTIONS
 from sb3_offon.common.offon_model import OffOnReplayMixin, check_lambda_arguments, check_option
 from sb3_offon.common.prioritized_buffers import PrioritizedBufferMixin
 from sb3_offon.common.quantile_loss import WeightedQuantileHuberLoss, per_sample_quantile_huber_loss, quantile_huber_loss
@@ -115,6 +116,9 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
     :param double_q: the online network picks the bootstrap action (the argmax of its quantiles' mean), the target
         network's quantiles at that action are the bootstrap law; the trace-cut test uses that action too
     :param lambda_form: ``"sampled"`` (default) or ``"projected"`` (see above)
+    :param non_finite: what a non-finite reward does: ``"raise"`` (default) a ``NonFiniteError`` naming the env and step,
+        nothing of that step stored; ``"skip"`` a warning, the step's transitions not stored and the running episodes
+        cut there as truncations. A non-finite loss always raises (:mod:`sb3_offon.common.non_finite`)
     :param stats_window_size: Window size for the rollout logging, specifying the number of episodes to average
         the reported success rate, mean episode length, and mean reward over
     :param tensorboard_log: the log location for tensorboard (if None, no logging)
@@ -169,6 +173,7 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
         lambda_refresh_interval: int | None = None,
         double_q: bool = False,
         lambda_form: str = "sampled",
+        non_finite: str = "raise",
         stats_window_size: int = 100,
         tensorboard_log: str | None = None,
         policy_kwargs: dict[str, Any] | None = None,
@@ -221,6 +226,7 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
         self.lambda_refresh_interval = lambda_refresh_interval
         self.double_q = double_q
         self.lambda_form = lambda_form
+        self.non_finite = non_finite
         self._check_buffer_discounting()
         # The sampled horizons have a generator of their own (saved with the model: a resumed run draws on)
         self.target_rng = np.random.default_rng(seed)
@@ -237,6 +243,7 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
             ("mc_mixing", SUPPORTED_MC_MIXING, "OffOnDQN's coin-flip modes are not supported by OffOnQRDQN"),
             ("loss", SUPPORTED_LOSSES, "OffOnQRDQN's loss is the quantile Huber loss"),
             ("lambda_form", LAMBDA_FORMS, ""),
+            ("non_finite", NON_FINITE_OPTIONS, ""),
         ):
             try:
                 check_option(name, getattr(self, name), options)
@@ -370,6 +377,7 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
         self.logger.record("train/loss", th.stack(losses).mean().item())
         self.logger.record("train/lambda", cache.lam)
         self.logger.record("train/trace_cut_fraction", cache.trace_cut_fraction)
+        self._check_training_loss()
 
     def learn(
         self: SelfOffOnQRDQN,

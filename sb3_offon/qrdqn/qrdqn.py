@@ -12,6 +12,8 @@ from contextlib import contextmanager
 import sb3_contrib
 from sb3_contrib.qrdqn import qrdqn as sb3_contrib_qrdqn
 
+from sb3_offon.common.non_finite import NonFiniteChecksMixin
+from sb3_offon.common.offon_model import check_positive_integer
 from sb3_offon.common.quantile_loss import quantile_huber_loss
 
 _swap_lock = threading.Lock()
@@ -41,7 +43,7 @@ def _sorted_quantile_huber_loss() -> Iterator[None]:
                 sb3_contrib_qrdqn.quantile_huber_loss = _sb3_contrib_loss
 
 
-class QRDQN(sb3_contrib.QRDQN):
+class QRDQN(NonFiniteChecksMixin, sb3_contrib.QRDQN):
     """
     Quantile Regression Deep Q-Network (QR-DQN), sb3-contrib's, with a faster loss: every argument, method and saved
     file is sb3-contrib's ``QRDQN``'s; only the quantile Huber loss of ``train`` is computed from sorted targets, with
@@ -50,9 +52,18 @@ class QRDQN(sb3_contrib.QRDQN):
 
     Paper: https://arxiv.org/abs/1710.10044
 
-    The constructor is sb3-contrib's: ``QRDQN(policy, env, ...)`` with the same arguments and defaults.
+    The constructor is sb3-contrib's: ``QRDQN(policy, env, ...)`` with the same arguments and defaults. Added: a
+    ``buffer_size`` or ``n_quantiles`` below 1 is a ``ValueError`` naming it, and a non-finite reward or loss stops
+    training with an error naming the env and step (:mod:`sb3_offon.common.non_finite`; set the attribute
+    ``non_finite = "skip"`` to skip steps with a non-finite reward instead).
     """
+
+    def _setup_model(self) -> None:
+        check_positive_integer("buffer_size", self.buffer_size)
+        check_positive_integer("n_quantiles", self.policy_kwargs.get("n_quantiles", 200))
+        super()._setup_model()
 
     def train(self, gradient_steps: int, batch_size: int = 100) -> None:
         with _sorted_quantile_huber_loss():
             super().train(gradient_steps, batch_size)
+        self._check_training_loss()
