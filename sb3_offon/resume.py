@@ -20,16 +20,22 @@ What differs from an uninterrupted run, by design:
 - with ``optimize_memory_usage`` (next observations not stored) the cut transition's next observation becomes the
   reset observation: use checkpoints without that option where this matters.
 
-Layout: ``<folder>/latest`` names the newest complete checkpoint, a sub-folder ``<folder>/<num_timesteps>/`` holding
-``model.zip``, ``replay_buffer.pkl``, ``evaluations.npz``, the joined monitor files, the ``VecNormalize`` statistics
-when the env is normalised (``vecnormalize.pkl``; ``<env name>/vecnormalize.pkl`` from the command line, where the zoo
-looks for them), and ``checkpoint.json``. A checkpoint is written in full before ``latest`` is replaced (atomically),
-so a run killed while writing one resumes from the one before.
+Layout: a sub-folder ``<folder>/<num_timesteps>/`` per checkpoint holding ``model.zip``, ``replay_buffer.pkl``,
+``evaluations.npz``, the joined monitor files, the ``VecNormalize`` statistics when the env is normalised
+(``vecnormalize.pkl``; ``<env name>/vecnormalize.pkl`` from the command line, where the zoo looks for them), and, written
+last, ``checkpoint.json``: the run's state, the size of every file (so that a truncated file is told from a complete
+one), the algorithm's class, and what the command line ran (its ``--algo`` and hyperparameters, which ``--resume``
+compares with its own). ``<folder>/latest`` names the newest. The two newest complete checkpoints are kept: a run resumes
+from the newest complete one, and from the one before it, with a warning naming what is wrong, when the newest is
+damaged (a run killed while writing it, a file lost or truncated). A checkpoint is written in full and synced before
+``latest`` is replaced (atomically) and older ones are removed.
 """
 
 import json
 import os
 import shutil
+import warnings
+import zipfile
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
@@ -42,6 +48,8 @@ from stable_baselines3.common.buffers import ReplayBuffer
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList, EvalCallback
 
 LATEST = "latest"
+# The complete checkpoints a run keeps: the newest, and one to fall back to if the newest turns out damaged
+KEPT_CHECKPOINTS = 2
 STATE_FILE = "checkpoint.json"
 MODEL_FILE = "model.zip"
 # The zoo's _load_pretrained_agent loads a replay buffer of this name next to the model
@@ -50,6 +58,47 @@ EVALUATIONS_FILE = "evaluations.npz"
 MONITOR_SUFFIX = "monitor.csv"
 # Written into a run's log folder by the command line when a callback of its own ended it before its budget on purpose
 STOPPED_FILE = "stopped.json"
+
+
+class CheckpointError(ValueError):
+    """A checkpoint that cannot be resumed: none complete, or made by another algorithm or with other settings."""
+
+
+def checkpoint_problem(folder: Path) -> str | None:
+    """
+    What makes the checkpoint in ``folder`` unusable, in a few words (None when it is complete): ``checkpoint.json``
+    missing or unreadable (written last, its absence means the writing was cut off), a file it lists missing or of
+    another size than written, ``model.zip`` not a readable zip.
+    """
+    state_file = folder / STATE_FILE
+    if not state_file.is_file():
+        return f"no {STATE_FILE} (its writing was cut off)"
+    try:
+        state = json.loads(state_file.read_text())
+    except (OSError, ValueError) as error:
+        return f"{STATE_FILE} unreadable ({error})"
+    # Checkpoints from before the sizes were recorded: the files they must have, not empty
+    sizes = state.get("file_sizes") or {
+        name: None for name in [MODEL_FILE, *([REPLAY_BUFFER_FILE] if state.get("replay_buffer") else [])]
+    }
+    for name, size in sizes.items():
+        path = folder / name
+        if not path.is_file():
+            return f"{name} missing"
+        actual = path.stat().st_size
+        if (size is None and actual == 0) or (size is not None and actual != size):
+            return f"{name} truncated ({actual} of {size if size is not None else 'more than 0'} bytes)"
+    if not zipfile.is_zipfile(folder / MODEL_FILE):
+        return f"{MODEL_FILE} not a readable zip"
+    return None
+
+
+def checkpoint_folders(folder: str | Path) -> list[Path]:
+    """The checkpoint sub-folders under ``folder`` (named by their step), the newest first."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        return []
+    return sorted((path for path in folder.iterdir() if path.is_dir() and path.name.isdigit()), key=lambda p: -int(p.name))
 
 
 def resumed_seed(seed: int | None, num_timesteps: int) -> int:
@@ -162,6 +211,10 @@ class Checkpoint:
         ``[class name, state]`` in the callbacks' order
     :param monitor_texts: the run's monitor files up to this checkpoint, by file name (read with the checkpoint: a
         resumed run writing its own checkpoints into the same folder removes this one)
+    :param algorithm: the model's class name (None: not recorded, older checkpoints)
+    :param run_config: what made the run, as the command line records it (``algo``, ``env``, ``hyperparams``; empty:
+        not recorded)
+    :param file_sizes: the size in bytes of each file of the checkpoint when it was written
     """
 
     folder: Path
@@ -175,32 +228,49 @@ class Checkpoint:
     replay_buffer: bool | None = None
     callback_states: list[list[Any]] = field(default_factory=list)
     monitor_texts: dict[str, str] = field(default_factory=dict)
+    algorithm: str | None = None
+    run_config: dict[str, Any] = field(default_factory=dict)
+    file_sizes: dict[str, int] = field(default_factory=dict)
 
     @classmethod
     def latest(cls, folder: str | Path) -> "Checkpoint | None":
         """
-        The newest complete checkpoint under ``folder`` (None when there is none).
+        The newest complete checkpoint under ``folder`` (None when there is none); when newer ones are damaged
+        (:func:`checkpoint_problem`), a warning says what is wrong with each.
 
         :param folder: the checkpoint folder of a run (``--checkpoint-dir``)
+        :raises CheckpointError: when there are checkpoints but none is complete, saying what each lacks
         """
-        pointer = Path(folder) / LATEST
-        if not pointer.is_file():
-            return None
-        checkpoint_folder = Path(folder) / pointer.read_text().strip()
-        state = json.loads((checkpoint_folder / STATE_FILE).read_text())
-        expected = [MODEL_FILE, *([REPLAY_BUFFER_FILE] if state.get("replay_buffer") else [])]
-        damaged = [
-            name
-            for name in expected
-            if not (checkpoint_folder / name).is_file() or (checkpoint_folder / name).stat().st_size == 0
-        ]
-        if damaged:
-            # Written in full and synced before `latest` named it: only a damaged disk or a hand edit gets here
-            raise ValueError(
-                f"The checkpoint in {checkpoint_folder} lacks {', '.join(damaged)}: remove the folder to start afresh"
+        candidates = checkpoint_folders(folder)
+        problems = []
+        for candidate in candidates:
+            problem = checkpoint_problem(candidate)
+            if problem is None:
+                if problems:
+                    warnings.warn(
+                        f"Checkpoints in {folder}: {'; '.join(problems)}: resuming from the one of step {candidate.name}",
+                        stacklevel=2,
+                    )
+                return cls.read(candidate)
+            problems.append(f"step {candidate.name}: {problem}")
+        if problems:
+            raise CheckpointError(f"No complete checkpoint in {folder}: {'; '.join(problems)}")
+        return None
+
+    @classmethod
+    def read(cls, folder: Path) -> "Checkpoint":
+        """The checkpoint in ``folder`` (complete: see :func:`checkpoint_problem`)."""
+        state = json.loads((folder / STATE_FILE).read_text())
+        monitors = {path.name: path.read_text() for path in sorted(folder.glob(f"*{MONITOR_SUFFIX}"))}
+        return cls(folder=folder, monitor_texts=monitors, **state)
+
+    def check_algorithm(self, algo_class: type[BaseAlgorithm]) -> None:
+        """:raises CheckpointError: if the checkpoint records a model of another class than ``algo_class``."""
+        if self.algorithm is not None and self.algorithm != algo_class.__name__:
+            raise CheckpointError(
+                f"The checkpoint in {self.folder} holds a {self.algorithm} model, not a {algo_class.__name__}: resume it "
+                "with the algorithm it was made by"
             )
-        monitors = {path.name: path.read_text() for path in sorted(checkpoint_folder.glob(f"*{MONITOR_SUFFIX}"))}
-        return cls(folder=checkpoint_folder, monitor_texts=monitors, **state)
 
     @property
     def model_path(self) -> Path:
@@ -298,6 +368,7 @@ class Checkpoint:
         :param kwargs: more arguments of ``algo_class.load`` (``device``, ``custom_objects``, ...)
         :return: the model, its replay buffer loaded
         """
+        self.check_algorithm(algo_class)
         model = algo_class.load(self.model_path, env=env, **kwargs)
         buffer = self.folder / REPLAY_BUFFER_FILE
         if buffer.is_file():
@@ -326,6 +397,8 @@ class RunCheckpoint(BaseCallback):
         (rl-baselines3-zoo loads them from ``<env name>/vecnormalize.pkl`` next to the model it continues)
     :param callbacks: the run's other callbacks: the running state of those that have one (:func:`stateful_callbacks`)
         is kept in each checkpoint
+    :param run_config: what made the run, kept in each checkpoint for a resume to compare with (the command line's
+        ``algo``, ``env`` and ``hyperparams``; JSON-serialisable)
     :param verbose: 1: a line per checkpoint written
     """
 
@@ -338,6 +411,7 @@ class RunCheckpoint(BaseCallback):
         resumed_from: Checkpoint | None = None,
         vec_normalize_path: str = "vecnormalize.pkl",
         callbacks: Sequence[BaseCallback] = (),
+        run_config: dict[str, Any] | None = None,
         verbose: int = 0,
     ) -> None:
         super().__init__(verbose)
@@ -350,6 +424,7 @@ class RunCheckpoint(BaseCallback):
         self.resumed_from = resumed_from
         self.vec_normalize_path = vec_normalize_path
         self.stateful = stateful_callbacks(callbacks)
+        self.run_config = dict(run_config or {})
         self._next_step = 0
 
     def _on_training_start(self) -> None:
@@ -375,7 +450,7 @@ class RunCheckpoint(BaseCallback):
         return [] if self.monitor_dir is None else sorted(self.monitor_dir.glob(f"*{MONITOR_SUFFIX}"))
 
     def save(self) -> Checkpoint:
-        """Write a checkpoint of the run now, then point ``latest`` at it and remove the older ones."""
+        """Write a checkpoint of the run now, then point ``latest`` at it and remove all but the newest complete ones."""
         model: BaseAlgorithm = self.model
         target = self.folder / str(model.num_timesteps)
         shutil.rmtree(target, ignore_errors=True)  # a partial one left by a killed run
@@ -404,14 +479,22 @@ class RunCheckpoint(BaseCallback):
             if callback.evaluations_timesteps:
                 save_evaluations(callback, target / EVALUATIONS_FILE)
             state.update(best_mean_reward=float(callback.best_mean_reward), last_mean_reward=float(callback.last_mean_reward))
+        state.update(algorithm=type(model).__name__, run_config=self.run_config)
+        # Every file but this state, which is written last: its presence says the others are complete
+        state["file_sizes"] = {
+            str(path.relative_to(target)): path.stat().st_size for path in sorted(target.rglob("*")) if path.is_file()
+        }
         (target / STATE_FILE).write_text(json.dumps(state, indent=2))
         # On disk before `latest` names it, so that a power cut cannot leave `latest` naming a checkpoint with empty files
         synced(target)
         pointer = self.folder / f"{LATEST}.tmp"
         pointer.write_text(target.name)
         os.replace(pointer, self.folder / LATEST)
+        # Kept: this one and the newest complete ones before it; removed: older ones and any a killed run left partial
+        complete = [folder for folder in checkpoint_folders(self.folder) if checkpoint_problem(folder) is None]
+        kept = {target, *complete[:KEPT_CHECKPOINTS]}
         for older in self.folder.iterdir():
-            if older.is_dir() and older != target:
+            if older.is_dir() and older not in kept:
                 shutil.rmtree(older, ignore_errors=True)
         if self.verbose >= 1:
             print(f"Checkpoint of step {model.num_timesteps} written to {target}")

@@ -10,8 +10,11 @@ Every flag of ``python -m rl_zoo3.train`` works (``--algo``, ``--env``, ``-n``, 
 Additions to the zoo's command line: ``--help`` opens with the algorithms this package adds (read from
 :data:`sb3_offon.zoo.ALGOS`) and where their settings are documented; an invalid value of one of OffOnDQN's own
 arguments (``--hyperparams mc_mixing:foo``) ends with one line naming the argument and its allowed values, on stderr
-with exit status 2 as argparse's errors, instead of a traceback; checkpoints to resume a run from (``--checkpoint-freq``,
-``--resume``); one torch thread unless ``--num-threads`` says otherwise; and denormal floats flushed to zero on the CPU
+with exit status 2 as argparse's errors, instead of a traceback, and so do an unknown hyperparameter (with the close
+matches) and a ``--resume`` refused (another algorithm, env, hyperparameters or budget; no complete checkpoint); a
+non-finite reward or loss ends the run with one line and exit status 1 (:mod:`sb3_offon.common.non_finite`);
+checkpoints to resume a run from (``--checkpoint-freq``, ``--resume``); one torch thread unless ``--num-threads`` says
+otherwise; and denormal floats flushed to zero on the CPU
 unless ``--keep-denormals`` (see :func:`flush_denormals_unless_kept`).
 
 Example::
@@ -244,6 +247,27 @@ def argument_errors_in_one_line() -> Iterator[None]:
         raise SystemExit(2) from None
 
 
+@contextmanager
+def run_errors_in_one_line(
+    usage_errors: tuple[type[BaseException], ...], run_errors: tuple[type[BaseException], ...]
+) -> Iterator[None]:
+    """
+    Turn the errors that say what to change in a line (an unknown hyperparameter, a checkpoint that cannot be resumed,
+    a non-finite reward or loss) into that line on stderr: exit status 2 for ``usage_errors`` (as argparse's), 1 for
+    ``run_errors`` (the run failed).
+
+    :raises SystemExit: after printing the line
+    """
+    try:
+        yield
+    except usage_errors as error:
+        print(f"{prog()}: error: {error}", file=sys.stderr)
+        raise SystemExit(2) from None
+    except run_errors as error:
+        print(f"{prog()}: error: {error}", file=sys.stderr)
+        raise SystemExit(1) from None
+
+
 def main() -> None:
     """Register the algorithms, then run the zoo's command line on ``sys.argv``."""
     # Imported here, not at the top: without the zoo extra, a one-line hint instead of a traceback
@@ -251,14 +275,17 @@ def main() -> None:
         import rl_zoo3.train as zoo_train
 
         from sb3_offon.cli_args import use_tolerant_store_dict
-        from sb3_offon.zoo import ALGO_SUMMARIES, ALGOS, register
+        from sb3_offon.common.non_finite import NonFiniteError
+        from sb3_offon.resume import CheckpointError
+        from sb3_offon.zoo import ALGO_SUMMARIES, ALGOS, UnknownHyperparameterError, register
     register()
     describe_help(zoo_train, ALGOS, ALGO_SUMMARIES)
     # ``--hyperparams mc_mixing:convex``: unquoted strings (the zoo alone needs "mc_mixing:'convex'")
     use_tolerant_store_dict()
     sys.argv[1:] = one_thread_by_default(sys.argv[1:])
     flush_denormals_unless_kept(sys.argv[1:])
-    with argument_errors_in_one_line(), unknown_env_in_one_line():
+    one_line = run_errors_in_one_line((UnknownHyperparameterError, CheckpointError), (NonFiniteError,))
+    with one_line, argument_errors_in_one_line(), unknown_env_in_one_line():
         zoo_train.train()
 
 

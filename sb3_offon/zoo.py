@@ -17,9 +17,11 @@ Its experiment manager (:class:`OffOnExperimentManager`) also writes checkpoints
 (``--checkpoint-freq``, ``--resume``).
 """
 
+import difflib
 import inspect
 import json
 import shutil
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -45,7 +47,7 @@ from sb3_offon.offon_dqn import OffOnDQN
 from sb3_offon.offon_dqn.offon_dqn import LOSS_FUNCTIONS, MC_MIXING_OPTIONS, SARSA_TARGET_OPTIONS
 from sb3_offon.offon_qrdqn import OffOnQRDQN
 from sb3_offon.qrdqn import QRDQN
-from sb3_offon.resume import STOPPED_FILE, Checkpoint, RunCheckpoint, joined_monitor
+from sb3_offon.resume import STOPPED_FILE, Checkpoint, CheckpointError, RunCheckpoint, checkpoint_folders, joined_monitor
 from sb3_offon.torch_layers import MinAtarCNN
 from sb3_offon.variants import DQNMC, DQNSarsa
 
@@ -117,15 +119,68 @@ def resolve_config(algo: str, config: str | None) -> str | None:
     return config
 
 
+# Keys of a YAML entry (or --hyperparams) that the zoo itself reads, the rest being the algorithm's keyword arguments
+ZOO_KEYS = frozenset(
+    {
+        "n_timesteps", "n_envs", "normalize", "policy", "env_wrapper", "vec_env_wrapper", "frame_stack", "callback",
+        "monitor_kwargs", "env_kwargs", "noise_type", "noise_std",
+    }
+)  # fmt: skip
+
+
+class UnknownHyperparameterError(ValueError):
+    """A hyperparameter (YAML entry or ``--hyperparams``) that is neither the zoo's nor an argument of the algorithm."""
+
+
+def constructor_arguments(algo_class: type) -> set[str] | None:
+    """
+    The keyword arguments ``algo_class(...)`` takes: its ``__init__``'s, and its bases' as far as each passes
+    ``**kwargs`` on (None when every ``__init__`` up to ``object`` takes ``**kwargs``: anything may be valid).
+    """
+    names: set[str] = set()
+    for klass in algo_class.__mro__:
+        init = klass.__dict__.get("__init__")
+        if init is None or klass is object:
+            continue
+        parameters = inspect.signature(init).parameters.values()
+        names |= {p.name for p in parameters if p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD)}
+        if not any(p.kind == p.VAR_KEYWORD for p in parameters):
+            return names - {"self"}
+    return None
+
+
+def check_hyperparameter_names(algo: str, algo_class: type, hyperparams: dict[str, Any]) -> None:
+    """
+    :raises UnknownHyperparameterError: naming the first key of ``hyperparams`` that is neither one of :data:`ZOO_KEYS`
+        nor an argument of ``algo_class``, with the close matches
+    """
+    arguments = constructor_arguments(algo_class)
+    if arguments is None:
+        return
+    known = arguments | ZOO_KEYS
+    for key in hyperparams:
+        if key not in known:
+            close = difflib.get_close_matches(key, sorted(known), n=3, cutoff=0.6)
+            hint = f"close matches: {', '.join(close)}" if close else "no argument is close to it"
+            raise UnknownHyperparameterError(
+                f"unknown hyperparameter '{key}' for --algo {algo} ({algo_class.__name__}); {hint}"
+            )
+
+
+def comparable(value: Any) -> Any:
+    """``value`` as JSON would give it back (tuples as lists, objects by their ``repr``): what checkpoints record."""
+    return json.loads(json.dumps(value, default=repr, sort_keys=True))
+
+
 def checkpoint_folder(resume: str | None) -> str | None:
     """
     The checkpoint folder ``--resume`` names: the folder itself, or, given the log folder of the interrupted run (the
     zoo's ``logs/{algo}/{env}_{n}``), its ``checkpoint/`` sub-folder, where ``--checkpoint-freq`` writes by default.
     """
-    if resume is None or Checkpoint.latest(resume) is not None:
+    if resume is None or checkpoint_folders(resume):
         return resume
     inside = Path(resume) / "checkpoint"
-    return str(inside) if Checkpoint.latest(inside) is not None else resume
+    return str(inside) if checkpoint_folders(inside) else resume
 
 
 class OffOnExperimentManager(ExperimentManager):
@@ -157,32 +212,87 @@ class OffOnExperimentManager(ExperimentManager):
         self.resume_dir = checkpoint_folder(getattr(args, "resume", None))
         self.checkpoint_dir = getattr(args, "checkpoint_dir", None) or self.resume_dir or f"{self.save_path}/checkpoint"
         self.resumed_from: Checkpoint | None = None
+        # What made the run (--algo, env, hyperparameters), kept in its checkpoints for --resume to compare with
+        self.run_config: dict[str, Any] = {}
 
     def setup_experiment(self) -> tuple[BaseAlgorithm, dict[str, Any]] | None:
         """
         The zoo's setup; with ``--resume``, the model, replay buffer and env normalisation are the checkpoint's (the
         zoo's own continue-training path loads them), the last stored transitions are cut as truncations, the random
         generators are seeded for the resumed part (:func:`sb3_offon.resume.resumed_seed`), and the evaluation callback
-        holds the evaluations so far.
+        holds the evaluations so far. A setup that fails (a refused resume, an unknown hyperparameter, a bad value)
+        leaves no run folder behind.
         """
         if self.resume_dir is not None:
             self.resumed_from = Checkpoint.latest(self.resume_dir)
             if self.resumed_from is None:
-                raise FileNotFoundError(f"--resume {self.resume_dir}: no checkpoint there (written by --checkpoint-freq)")
+                raise CheckpointError(f"--resume {self.resume_dir}: no checkpoint there (written by --checkpoint-freq)")
             self.trained_agent = str(self.resumed_from.model_path)
             self.continue_training = True
-        results = super().setup_experiment()
+        run_folder_existed = Path(self.save_path).exists()
+        try:
+            results = super().setup_experiment()
+        except BaseException:
+            if not run_folder_existed:
+                shutil.rmtree(self.save_path, ignore_errors=True)
+            raise
         if results is None or self.resumed_from is None:
             return results
         model, saved_hyperparams = results
-        checkpoint = self.resumed_from
-        if self.n_timesteps != checkpoint.total_timesteps:
-            raise ValueError(
-                f"--resume {self.resume_dir}: the run was checkpointed with a budget of {checkpoint.total_timesteps} "
-                f"steps, this command trains {self.n_timesteps} (-n): a resumed run keeps its budget"
-            )
-        checkpoint.prepare(model, self._eval_callback(), self.callbacks)
+        self.resumed_from.prepare(model, self._eval_callback(), self.callbacks)
         return model, saved_hyperparams
+
+    def read_hyperparameters(self) -> tuple[dict[str, Any], dict[str, Any]]:
+        """
+        The zoo's hyperparameters, checked before anything is made: every key the zoo's or an argument of the algorithm
+        (:func:`check_hyperparameter_names`), and with ``--resume`` the algorithm, env, hyperparameters and budget the
+        checkpoint was made with (:meth:`check_resumed_run`).
+        """
+        hyperparams, saved_hyperparams = super().read_hyperparameters()
+        check_hyperparameter_names(self.algo, ALGOS.get(self.algo, zoo_utils.ALGOS[self.algo]), hyperparams)
+        self.run_config = {
+            "algo": ALIASES.get(self.algo, self.algo),
+            "env": self.env_name.gym_id,
+            "hyperparams": comparable(dict(saved_hyperparams)),
+        }
+        if self.resumed_from is not None:
+            budget = self.n_timesteps if self.n_timesteps > 0 else int(hyperparams["n_timesteps"])
+            self.check_resumed_run(self.resumed_from, budget)
+        return hyperparams, saved_hyperparams
+
+    def check_resumed_run(self, checkpoint: Checkpoint, budget: int) -> None:
+        """
+        :raises CheckpointError: in a line, when the checkpoint was made by another algorithm, on another env, with
+            other hyperparameters (each that differs named with both values) or another budget than this command's
+        """
+        where = f"--resume {self.resume_dir}"
+        recorded = checkpoint.run_config
+        if not recorded:
+            # Made from Python, or before checkpoints recorded what made them: the model's class is all there is
+            checkpoint.check_algorithm(zoo_utils.ALGOS[self.algo])
+            warnings.warn(f"{where}: the checkpoint does not record the hyperparameters it was made with: not compared")
+        else:
+            for key, flag in (("algo", "--algo"), ("env", "--env")):
+                if recorded.get(key) != self.run_config[key]:
+                    raise CheckpointError(
+                        f"{where}: the run was made with {flag} {recorded.get(key)}, this command has {flag} "
+                        f"{self.run_config[key]}: resume a run with what it was started with"
+                    )
+            before, now = recorded.get("hyperparams", {}), self.run_config["hyperparams"]
+            differences = [
+                f"{key} {before.get(key, '(not set)')!r} there, {now.get(key, '(not set)')!r} here"
+                for key in sorted({*before, *now})
+                if before.get(key) != now.get(key)
+            ]
+            if differences:
+                raise CheckpointError(
+                    f"{where}: the run was made with other hyperparameters than this command gives: {'; '.join(differences)}"
+                )
+        if budget != checkpoint.total_timesteps:
+            raise CheckpointError(
+                f"{where}: the run was checkpointed with a budget of {checkpoint.total_timesteps} steps, this command "
+                f"trains {budget} (-n): a resumed run keeps its budget"
+            )
 
     def _eval_callback(self) -> EvalCallback | None:
         """The run's evaluation callback, which the zoo's ``create_callbacks`` adds with ``--eval-freq`` (else None)."""
@@ -209,6 +319,7 @@ class OffOnExperimentManager(ExperimentManager):
                     # Where the zoo's continue-training path looks for them (ExperimentManager._maybe_normalize)
                     vec_normalize_path=f"{self.env_name}/vecnormalize.pkl",
                     callbacks=list(self.callbacks),
+                    run_config=self.run_config,
                     verbose=self.verbose,
                 )
             )

@@ -107,3 +107,29 @@ def test_an_unknown_env_is_one_line_with_close_matches() -> None:
     # One line, no traceback; the closest registered ids first (Gymnasium's CartPole-v1 the closest of all)
     (line,) = result.stderr.strip().splitlines()
     assert line.startswith("python -m sb3_offon.train: error: unknown environment 'CartPol-v1'; close matches: CartPole-v1")
+
+
+@pytest.mark.parametrize(
+    "algo, hyperparams, expected",
+    [
+        ("offon_dqn", ["lerning_rate:0.001"], "unknown hyperparameter 'lerning_rate' for --algo offon_dqn (OffOnDQN); "
+         "close matches: learning_rate"),
+        ("dqn", ["lerning_rate:0.001"], "unknown hyperparameter 'lerning_rate' for --algo dqn (DQN); "
+         "close matches: learning_rate"),
+        ("qrdqn", ["policy_kwargs:dict(n_quantiles=0)"], "`n_quantiles` must be a positive integer, got 0"),
+        ("offon_qrdqn", ["buffer_size:0"], "`buffer_size` must be a positive integer, got 0"),
+    ],
+)  # fmt: skip
+def test_a_bad_hyperparameter_is_one_line_and_leaves_no_run_folder(
+    algo: str, hyperparams: list[str], expected: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys
+) -> None:
+    from sb3_offon.train import main
+
+    argv = ["sb3_offon.train", "--algo", algo, "--env", "CartPole-v1", "-n", "100", "-f", str(tmp_path), "--hyperparams"]
+    monkeypatch.setattr(sys, "argv", [*argv, *hyperparams])
+    with pytest.raises(SystemExit) as raised:
+        main()
+    assert raised.value.code == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert line.startswith("python -m sb3_offon.train: error: ") and expected in line, line
+    assert not (tmp_path / algo).exists() or not any((tmp_path / algo).iterdir()), "no run folder left behind"

@@ -54,10 +54,7 @@ def cartpole(step: int = 300, value: float = float("nan"), n_envs: int = 1, bad_
     def wrapper(env: gym.Env, index: int) -> gym.Env:
         return BadRewardAt(env, step, value) if index == bad_env else env
 
-    envs = [
-        (lambda index=index: wrapper(gym.make("CartPole-v1"), index))  # noqa: E731
-        for index in range(n_envs)
-    ]
+    envs = [(lambda index=index: wrapper(gym.make("CartPole-v1"), index)) for index in range(n_envs)]
     from stable_baselines3.common.vec_env import DummyVecEnv
 
     return DummyVecEnv(envs)
@@ -111,7 +108,8 @@ def test_without_the_checks_a_nan_reward_poisons_sb3s_dqn() -> None:
 
 def test_non_finite_rewards_message() -> None:
     assert non_finite_rewards(np.array([0.0, 1.0]), 10) is None
-    assert non_finite_rewards(np.array([0.0, -np.inf, np.nan]), 12) == "reward -inf from env 1, reward nan from env 2 at step 12"
+    message = non_finite_rewards(np.array([0.0, -np.inf, np.nan]), 12)
+    assert message == "reward -inf from env 1, reward nan from env 2 at step 12"
 
 
 @pytest.mark.parametrize("name", ["offon_dqn_lambda", "offon_qrdqn"])
@@ -172,3 +170,36 @@ def test_buffer_size_below_one_is_refused(algo, size: int) -> None:
 def test_n_quantiles_below_one_is_refused(algo) -> None:
     with pytest.raises(ValueError, match=r"`n_quantiles` must be a positive integer, got 0"):
         algo("MlpPolicy", "CartPole-v1", policy_kwargs=dict(n_quantiles=0))
+
+
+@pytest.mark.parametrize("algo", ["dqn", "offon_dqn", "qrdqn"])
+def test_the_command_line_stops_with_one_line_and_saves_nothing(
+    algo: str, tmp_path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
+) -> None:
+    import sys
+
+    from sb3_offon.train import main
+
+    env_id = "NaNRewardAt300CartPole-v1"
+    if env_id not in gym.registry:
+        gym.register(env_id, entry_point=lambda **kwargs: BadRewardAt(gym.make("CartPole-v1", **kwargs), 300, float("nan")))
+    config = tmp_path / "settings.yml"
+    config.write_text(f"{env_id}:\n  n_timesteps: 1000\n  policy: MlpPolicy\n  learning_starts: 100\n")
+    argv = ["sb3_offon.train", "--algo", algo, "--env", env_id, "-conf", str(config), "-f", str(tmp_path / "logs")]
+    monkeypatch.setattr(sys, "argv", [*argv, "--eval-freq", "200", "--checkpoint-freq", "200"])
+    with pytest.raises(SystemExit) as raised:
+        main()
+    assert raised.value.code == 1
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert line.startswith("python -m sb3_offon.train: error: Non-finite reward nan from env 0 at step 300"), line
+    (run,) = (tmp_path / "logs" / algo).iterdir()
+    # What was saved (the best model of the evaluation at step 200, the checkpoint of step 200) came before the NaN
+    from sb3_offon.resume import Checkpoint
+    from sb3_offon.zoo import ALGOS
+
+    saved = sorted(run.rglob("*.zip"))
+    assert not (run / f"{env_id}.zip").exists(), "the zoo's final model is not saved"
+    assert Checkpoint.latest(run / "checkpoint").num_timesteps == 200
+    for path in saved:
+        model = ALGOS.get(algo, DQN).load(path)
+        assert all(th.isfinite(parameter).all() for parameter in model.policy.parameters()), path

@@ -3,6 +3,7 @@
 import itertools
 import json
 import pickle
+import re
 import sys
 from pathlib import Path
 
@@ -20,7 +21,7 @@ from stable_baselines3.common.monitor import Monitor
 
 from sb3_offon import OffOnDQN, OffOnQRDQN
 from sb3_offon.callbacks import StopOnMeanTrainingReward
-from sb3_offon.resume import Checkpoint, RunCheckpoint, cut_running_episodes, joined_monitor, resumed_seed
+from sb3_offon.resume import Checkpoint, CheckpointError, RunCheckpoint, cut_running_episodes, joined_monitor, resumed_seed
 from sb3_offon.train import main
 
 BUDGET, EVERY = 4000, 1000
@@ -216,16 +217,81 @@ def test_a_normalised_env_resumes_with_its_statistics(tmp_path: Path, monkeypatc
     assert statistics.obs_rms.count > 4000
 
 
-def test_resume_keeps_the_budget(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def refused(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture, folder: Path, algo: str, *extra: str) -> str:
+    """The one line on stderr with which the command line refuses to run (exit status 2); no run folder is left."""
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exit_info:
+        train(monkeypatch, folder, algo, *extra)
+    assert exit_info.value.code == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("python -m sb3_offon.train: error: ")
+    assert not (folder / algo).exists() or not any((folder / algo).iterdir()), "a refused run leaves no run folder"
+    return lines[0]
+
+
+def test_resume_refuses_another_budget_algorithm_or_hyperparameters(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
+) -> None:
     with monkeypatch.context() as patch:
         interrupt_after_checkpoint(patch, 1000)
         cut = train(patch, tmp_path / "cut", "dqn")
     state = json.loads((cut / "checkpoint" / "1024" / "checkpoint.json").read_text())
     assert state["num_timesteps"] == 1024 and state["resumed_at"] == []
-    with pytest.raises(ValueError, match="budget of 4000 steps, this command trains 5000"):
-        train(monkeypatch, tmp_path / "longer", "dqn", "--resume", str(cut / "checkpoint"), "-n", "5000")
-    with pytest.raises(FileNotFoundError, match="no checkpoint there"):
-        train(monkeypatch, tmp_path / "none", "dqn", "--resume", str(tmp_path / "nowhere"))
+    assert state["algorithm"] == "DQN" and state["run_config"]["algo"] == "dqn"
+    assert state["run_config"]["hyperparams"]["learning_starts"] == 500
+    checkpoint = str(cut / "checkpoint")
+    line = refused(monkeypatch, capsys, tmp_path / "longer", "dqn", "--resume", checkpoint, "-n", "5000")
+    assert "budget of 4000 steps, this command trains 5000" in line
+    line = refused(monkeypatch, capsys, tmp_path / "other", "offon_dqn", "--resume", checkpoint)
+    assert "the run was made with --algo dqn, this command has --algo offon_dqn" in line
+    changed = ("--hyperparams", "learning_starts:600", "exploration_fraction:0.5")
+    line = refused(monkeypatch, capsys, tmp_path / "changed", "dqn", "--resume", checkpoint, *changed)
+    assert line.endswith("other hyperparameters than this command gives: learning_starts 500 there, 600 here")
+    line = refused(monkeypatch, capsys, tmp_path / "none", "dqn", "--resume", str(tmp_path / "nowhere"))
+    assert "no checkpoint there" in line
+    with pytest.raises(ValueError, match="holds a DQN model, not a OffOnDQN"):
+        Checkpoint.latest(checkpoint).load_model(OffOnDQN, None)
+
+
+def test_a_damaged_checkpoint_falls_back_to_the_one_before(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
+) -> None:
+    with monkeypatch.context() as patch:
+        interrupt_after_checkpoint(patch, 2000)
+        cut = train(patch, tmp_path / "cut", "dqn")
+    folder = cut / "checkpoint"
+    assert sorted(path.name for path in folder.iterdir()) == ["1024", "2048", "latest"], "the two newest kept"
+    newest, before = folder / "2048", folder / "1024"
+    model = (newest / "model.zip").read_bytes()
+    (newest / "model.zip").write_bytes(model[: len(model) // 2])
+    truncated = rf"2048: model.zip truncated \({len(model) // 2} of {len(model)} bytes\): resuming from the one of step 1024"
+    with pytest.warns(UserWarning, match=truncated):
+        assert Checkpoint.latest(folder).num_timesteps == 1024
+    (newest / "model.zip").write_bytes(model)
+    (newest / "checkpoint.json").unlink()
+    with pytest.warns(UserWarning, match=r"step 2048: no checkpoint.json \(its writing was cut off\)"):
+        assert Checkpoint.latest(folder).num_timesteps == 1024
+    (before / "replay_buffer.pkl").unlink()
+    expected = r"No complete checkpoint in .*: step 2048: no checkpoint.json .*; step 1024: replay_buffer.pkl missing$"
+    with pytest.raises(CheckpointError, match=expected):
+        Checkpoint.latest(folder)
+    assert re.search(expected, refused(monkeypatch, capsys, tmp_path / "both", "dqn", "--resume", str(cut)))
+
+
+def test_a_run_resumes_from_the_checkpoint_before_a_damaged_one(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    with monkeypatch.context() as patch:
+        interrupt_after_checkpoint(patch, 2000)
+        cut = train(patch, tmp_path / "cut", "dqn")
+    with open(cut / "checkpoint" / "2048" / "replay_buffer.pkl", "r+b") as file:
+        file.truncate(100)
+    fallback_monitor = (cut / "checkpoint" / "1024" / "0.monitor.csv").read_text()
+    with pytest.warns(UserWarning, match="step 2048: replay_buffer.pkl truncated"):
+        resumed = train(monkeypatch, tmp_path / "resumed", "dqn", "--resume", str(cut))
+    evaluations = np.load(resumed / "evaluations.npz")
+    np.testing.assert_array_equal(evaluations["timesteps"], [1000, 2000, 3000, 4000])
+    # Resumed at step 1024: its training episodes go on from the ones that checkpoint holds
+    assert (resumed / "0.monitor.csv").read_text().startswith(fallback_monitor)
+    assert len(monitor_rows(resumed / "0.monitor.csv")) > len(fallback_monitor.splitlines()) - 2
 
 
 def test_a_run_resumed_after_its_last_evaluation_keeps_them(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -242,17 +308,6 @@ def test_a_run_resumed_after_its_last_evaluation_keeps_them(tmp_path: Path, monk
     np.testing.assert_array_equal(after["timesteps"], [1000, 2000, 3000])
     np.testing.assert_array_equal(after["results"], before["results"])
     assert not (cut / "checkpoint").exists(), "the run reached its budget"
-
-
-def test_a_damaged_checkpoint_is_named(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    with monkeypatch.context() as patch:
-        interrupt_after_checkpoint(patch, 1000)
-        cut = train(patch, tmp_path / "cut", "dqn")
-    checkpoint = Checkpoint.latest(cut / "checkpoint")
-    assert checkpoint.replay_buffer is True
-    (checkpoint.folder / "replay_buffer.pkl").unlink()
-    with pytest.raises(ValueError, match=r"lacks replay_buffer\.pkl"):
-        Checkpoint.latest(cut / "checkpoint")
 
 
 def stop_rule(threshold: float, window: int) -> str:
