@@ -242,7 +242,7 @@ class Checkpoint:
         :raises CheckpointError: when there are checkpoints but none is complete, saying what each lacks
         """
         candidates = checkpoint_folders(folder)
-        problems = []
+        problems: list[str] = []
         for candidate in candidates:
             problem = checkpoint_problem(candidate)
             if problem is None:

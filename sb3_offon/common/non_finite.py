@@ -116,7 +116,7 @@ class NonFiniteChecksMixin:
         )
         cut_running_episodes_at_skip(replay_buffer)
         if hasattr(self, "_lambda_cache"):
-            self._lambda_cache = None  # the cut changed the last transitions' returns
+            setattr(self, "_lambda_cache", None)  # noqa: B010 (the cut changed the last transitions' returns)
         # What SB3's _store_transition does after storing: the next transition starts from the new observations
         self._last_obs = new_obs
         vec_normalize_env = getattr(self, "_vec_normalize_env", None)
