@@ -139,7 +139,7 @@ def add_package_arguments(parser: argparse.ArgumentParser) -> None:
         type=int,
         default=0,
         help="write a checkpoint to resume the run from every n env steps (model, replay buffer, evaluations, monitor "
-        "files; the newest one kept, removed when the run reaches its budget). A multiple of --eval-freq is cheapest",
+        "files; the two newest kept, removed when the run reaches its budget). A multiple of --eval-freq is cheapest",
     )
     parser.add_argument(
         "--checkpoint-dir",

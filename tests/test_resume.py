@@ -253,6 +253,17 @@ def test_resume_refuses_another_budget_algorithm_or_hyperparameters(
         Checkpoint.latest(checkpoint).load_model(OffOnDQN, None)
 
 
+def test_resume_refuses_an_offon_dqn_checkpoint_with_algo_dqn(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
+) -> None:
+    # Before, `--algo dqn` loaded dqn.yml and went on as SB3's DQN from OffOnDQN's checkpoint, the budget alone checked
+    with monkeypatch.context() as patch:
+        interrupt_after_checkpoint(patch, 1000)
+        cut = train(patch, tmp_path / "cut", "offon_dqn")
+    line = refused(monkeypatch, capsys, tmp_path / "other", "dqn", "--resume", str(cut))
+    assert "the run was made with --algo offon_dqn, this command has --algo dqn" in line
+
+
 def test_a_damaged_checkpoint_falls_back_to_the_one_before(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
 ) -> None:
