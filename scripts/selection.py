@@ -7,7 +7,10 @@ study's ``rule`` (the criteria of ``scripts/study.py``, about that candidate): "
 as soon as one fails, "pending" while runs are missing. ``choose`` then picks, among the candidates that pass, the one
 with the highest mean over ``envs`` of the normalised mean ``measure`` (fixed ``normalisation`` ranges), and says
 whether it is above each of ``against``; the choice waits until every judged candidate is decided. With ``per_env``,
-it picks on each env the candidate with the highest mean ``measure`` instead (no rule: the n of n-step DQN).
+it picks on each env the candidate with the highest mean ``measure`` instead (no rule: the n of n-step DQN). With
+``pairs`` (``{candidate: reference}``, an option against its absence), it says on each env whether the candidate is
+taken: its mean normalised AUC and mean final return both above the reference's, and the 95% interval of the
+difference of mean final returns wholly above 0 (prioritised replay's first look).
 
 ``scripts/study.py`` calls :func:`report` for such a study; its table goes to ``<out>/<study name>.md``.
 """
@@ -15,8 +18,8 @@ it picks on each env the candidate with the highest mean ``measure`` instead (no
 from pathlib import Path
 
 import numpy as np
-from rule import complete, judge_criterion, mean_normalised
-from run_stats import label
+from rule import complete, final_difference, interval, judge_criterion, mean_normalised
+from run_stats import label, mean_ci
 from study_file import Study
 
 
@@ -84,6 +87,49 @@ def per_env_choice(study: Study, runs: dict, scores: dict) -> list[str]:
     return lines
 
 
+def mean_with_interval(study: Study, scores: dict, env: str, name: str, measure: str) -> str:
+    """A candidate's mean ``measure`` on ``env`` over its finished runs, with its 95% bootstrap interval, and the count."""
+    values = scores.get(env, {}).get(name)
+    if values is None:
+        return "—"
+    point, low, high = mean_ci(np.asarray(values[measure]), study.reps_difference)
+    return f"{interval((float(point[0]), float(low[0]), float(high[0])))} ({len(values[measure])})"
+
+
+def paired_choice(study: Study, runs: dict, scores: dict) -> tuple[str, list[str]]:
+    """One row per pair and env: both sides' final return and AUC, the difference of final returns, and whether the
+    candidate is taken there (see the module's docstring); the decision lists the envs where it is."""
+    lines = [
+        "| Candidate | Against | Env | Final return | Reference's | Difference | AUC | Reference's | Taken |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    taken, pending = [], 0
+    for name, reference in study.choose["pairs"].items():
+        for env in study.envs_for(name):
+            ready = complete(study, runs, env, name) and complete(study, runs, env, reference)
+            difference = final_difference(study, scores, env, name, reference) if ready else None
+            if difference is None:
+                verdict, pending = "pending", pending + 1
+            else:
+                ours, theirs = scores[env][name], scores[env][reference]
+                above = all(np.mean(ours[key]) > np.mean(theirs[key]) for key in ("final", "auc"))
+                verdict = "yes" if above and difference[1] > 0 else "no"
+                if verdict == "yes":
+                    taken.append(f"{name} on {env}")
+            cells = [
+                mean_with_interval(study, scores, env, side, measure)
+                for measure in ("final", "auc")
+                for side in (name, reference)
+            ]
+            final, final_ref, auc, auc_ref = cells
+            difference_text = interval(difference) if difference is not None else "—"
+            lines.append(
+                f"| {name} | {reference} | {env} | {final} | {final_ref} | {difference_text} | {auc} | {auc_ref} | {verdict} |"
+            )
+    decision = f"pending ({pending} env pairs without all their runs)" if pending else (", ".join(taken) or "none")
+    return decision, lines
+
+
 def report(study: Study, runs: dict, scores: dict, out: Path, command: str) -> str:
     """Write ``<out>/<name>.md``: every candidate, whether it passes and why, and the choice; return the choice."""
     own = [
@@ -107,6 +153,15 @@ def report(study: Study, runs: dict, scores: dict, out: Path, command: str) -> s
     if study.choose and study.choose.get("per_env"):
         decision = "per env"
         text += per_env_choice(study, runs, scores)
+    elif study.choose and study.choose.get("pairs"):
+        decision, lines = paired_choice(study, runs, scores)
+        text += lines
+        text += [
+            "",
+            f"**Taken: {decision}** (mean AUC and mean final return above the reference's, and the 95% interval "
+            "of the difference of mean final returns wholly above 0; means with 95% bootstrap intervals, the runs' "
+            "count in brackets)",
+        ]
     else:
         envs = study.choose.get("envs", study.envs)
         verdicts, details = {}, {}

@@ -98,6 +98,27 @@ def test_a_choice_per_env(tmp_path: Path) -> None:
     assert "| Acrobot-v1 | -100 / -100 (3) | -150 / -150 (3) | n3 |" in table
 
 
+def test_an_option_taken_per_env_against_its_absence(tmp_path: Path) -> None:
+    finals = {
+        "uniform": {"CartPole-v1": [100.0, 110.0, 120.0], "Acrobot-v1": [-100.0, -110.0, -120.0]},
+        # CartPole: above on every seed, the difference's interval above 0; Acrobot: a higher mean from one seed only
+        "prioritised": {"CartPole-v1": [200.0, 210.0, 220.0], "Acrobot-v1": [-60.0, -150.0, -121.0]},
+    }
+    path, root = selection_study(
+        tmp_path, finals, choose={"pairs": {"prioritised": "uniform"}}, references=["uniform"], rule=[]
+    )
+    decision, table = choose(tmp_path, path, root)
+    assert decision == "prioritised on CartPole-v1"
+    rows = {line.split(" | ")[2]: line for line in table.splitlines() if line.startswith("| prioritised | uniform |")}
+    assert rows["CartPole-v1"].startswith("| prioritised | uniform | CartPole-v1 | 210.00 [")
+    assert "| 100.00 [86.67, 113.33] |" in rows["CartPole-v1"] and rows["CartPole-v1"].endswith("| yes |")
+    # Mean -110.33 against -110: above by the mean, but the difference's interval spans 0
+    assert rows["Acrobot-v1"].endswith("| no |") and "-110.33 [" in rows["Acrobot-v1"]
+    (root / "search/uniform/tuned/offon_dqn/Acrobot-v1_2/done.json").unlink()
+    decision, table = choose(tmp_path, path, root)
+    assert decision == "pending (1 env pairs without all their runs)"
+
+
 def test_the_runner_runs_each_candidate_with_its_settings(tmp_path: Path) -> None:
     module = load_script("benchmark")
     study = {
