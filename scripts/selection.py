@@ -185,10 +185,12 @@ def report(study: Study, runs: dict, scores: dict, out: Path, command: str) -> s
             f"{criterion['kind']} against {label(criterion['reference'])}" + (f" ({k})" if (k := extras(criterion)) else "")
             for criterion in study.rule
         )
-        text += ["", f"**Choice: {decision}** (the highest mean among the candidates that pass the rule: {rule})", ""]
-        text += ["Why each candidate passes or not:", ""]
-        for name in study.judged:
-            text += [f"- {name}:", *[f"  - {line}" for line in details[name]]]
+        basis = f"the highest mean among the candidates that pass the rule: {rule}" if rule else "the highest mean"
+        text += ["", f"**Choice: {decision}** ({basis})"]
+        if study.rule:
+            text += ["", "Why each candidate passes or not:", ""]
+            for name in study.judged:
+                text += [f"- {name}:", *[f"  - {line}" for line in details[name]]]
     if isinstance(study.normalisation, dict):
         ranges = ", ".join(f"{env} [{low:g}, {high:g}]" for env, (low, high) in study.normalisation.items())
         text += ["", f"Normalisation (score - low) / (high - low), fixed before the runs: {ranges}."]
