@@ -1,8 +1,8 @@
 """
-Training on cached lambda-returns: when to refresh them, how many to compute and which to train on
-(:class:`LambdaRefreshMixin`, shared by OffOnDQN's ``mc_mixing="lambda"`` and OffOnQRDQN), and OffOnDQN's own part
-(:class:`LambdaTrainingMixin`): the target network's pass over the next observations and the gradient steps on the
-cached returns. The returns themselves are computed in :mod:`sb3_offon.offon_dqn.lambda_returns`.
+Training on cached lambda-returns: when to refresh them, how many to compute, which to train on, and the gradient steps
+on them (:class:`LambdaRefreshMixin`, shared by OffOnDQN's ``mc_mixing="lambda"`` and
+OffOnQRDQN), and OffOnDQN's own part (:class:`LambdaTrainingMixin`): the target network's pass over the next
+observations and the loss of a step. The returns themselves are computed in :mod:`sb3_offon.offon_dqn.lambda_returns`.
 """
 
 import math
@@ -47,9 +47,17 @@ class LambdaRefreshMixin:
     num_timesteps: int
     lambda_refresh_interval: int | None
     device: th.device
+    policy: Any
+    logger: Logger
+    max_grad_norm: Any  # float for DQN, float | None for QR-DQN
     _n_calls: int
+    _n_updates: int
+    _vec_normalize_env: VecNormalize | None
     _lambda_cache: LambdaReturnCache | None
     _observation_bytes: Callable[[], int]
+    _update_learning_rate: Callable[..., None]
+    _steps_per_chunk: Callable[[int], int]
+    _parameter_list: Callable[[], list[th.nn.Parameter]]
 
     def _lambda_refresh_key(self) -> int:
         """
@@ -130,6 +138,78 @@ class LambdaRefreshMixin:
         priorities = np.abs(errors.reshape(-1)) + buffer.epsilon
         cache.tree.update(entries[live], np.power(priorities[live], buffer.alpha), check=False)
 
+    def _train_on_lambda_cache(self, gradient_steps: int, batch_size: int) -> None:
+        """
+        ``gradient_steps`` updates of the online network towards cached lambda-returns (refreshed first if due), drawn
+        uniformly or, with prioritised replay, by priority: the loop OffOnDQN and OffOnQRDQN share. The minibatches are
+        gathered and uploaded in chunks of several steps; each algorithm turns a chunk into tensors
+        (:meth:`_lambda_chunk_tensors`) and a step's rows into its loss (:meth:`_lambda_step_loss`); the losses are read
+        back once, at the end.
+        """
+        assert isinstance(self.replay_buffer, OffOnBufferMixin)
+        self.policy.set_training_mode(True)
+        self._update_learning_rate(self.policy.optimizer)
+        prioritized = isinstance(self.replay_buffer, PrioritizedBufferMixin)
+        weights = None
+        if prioritized:
+            cache, entries, weights = self._draw_prioritized_lambda_entries(gradient_steps * batch_size)
+        else:
+            cache, entries = self._draw_lambda_entries(gradient_steps * batch_size)
+        parameters = self._parameter_list()
+        losses, errors = [], []
+        steps_per_chunk = self._steps_per_chunk(batch_size)
+        for first_step in range(0, gradient_steps, steps_per_chunk):
+            n_steps = min(steps_per_chunk, gradient_steps - first_step)
+            positions = slice(first_step * batch_size, (first_step + n_steps) * batch_size)
+            chunk = entries[positions]
+            observations, actions = self.replay_buffer.observations_and_actions(
+                cache.slots[chunk], cache.envs[chunk], self._vec_normalize_env
+            )
+            observations_tensor = obs_as_tensor(observations, self.device)
+            actions_tensor, targets, weights_tensor = self._lambda_chunk_tensors(
+                actions, cache.returns[chunk], None if weights is None else weights[positions]
+            )
+            for step in range(n_steps):
+                rows = slice(step * batch_size, (step + 1) * batch_size)
+                loss, step_errors = self._lambda_step_loss(
+                    rows_of(observations_tensor, rows),
+                    actions_tensor[rows],
+                    targets[rows],
+                    None if weights_tensor is None else weights_tensor[rows],
+                )
+                if step_errors is not None:
+                    errors.append(step_errors)
+
+                self.policy.optimizer.zero_grad()
+                loss.backward()
+                if self.max_grad_norm is not None:
+                    th.nn.utils.clip_grad_norm_(parameters, self.max_grad_norm)
+                self.policy.optimizer.step()
+                losses.append(loss.detach())
+
+        self._n_updates += gradient_steps
+        self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
+        if prioritized:
+            self._update_lambda_priorities(cache, entries, th.cat(errors).cpu().numpy())
+        self.logger.record("train/loss", th.stack(losses).mean().item())
+        self.logger.record("train/lambda", cache.lam)
+        self.logger.record("train/trace_cut_fraction", cache.trace_cut_fraction)
+
+    def _lambda_chunk_tensors(
+        self, actions: np.ndarray, returns: np.ndarray, weights: np.ndarray | None
+    ) -> tuple[th.Tensor, th.Tensor, th.Tensor | None]:
+        """A chunk's actions, cached returns and importance weights (None: uniform) as the step loss takes them."""
+        raise NotImplementedError
+
+    def _lambda_step_loss(
+        self, observations: Any, actions: th.Tensor, targets: th.Tensor, weights: th.Tensor | None
+    ) -> tuple[th.Tensor, th.Tensor | None]:
+        """
+        One gradient step's loss on its rows, importance-weighted when ``weights`` is given, and then also each sample's
+        error, whose magnitude becomes its priority (else None).
+        """
+        raise NotImplementedError
+
     def _lambda_samples_per_refresh(self) -> int:
         """
         How many transitions will be trained on from one refresh to the next (with ``train_freq`` in steps; in
@@ -177,97 +257,40 @@ class LambdaRefreshMixin:
 class LambdaTrainingMixin(LambdaRefreshMixin):
     """
     The lambda-return training of :class:`sb3_offon.OffOnDQN`, kept apart from its coin-flip targets (see
-    ``mc_mixing="lambda"`` in OffOnDQN's docstring for what is computed, how often, and at what cost).
+    ``mc_mixing="lambda"`` in OffOnDQN's docstring for what is computed, how often, and at what cost): its returns'
+    computation, the target network's pass behind it, and its step loss in the shared loop
+    (:meth:`LambdaRefreshMixin._train_on_lambda_cache`).
     """
 
-    # Attributes and methods of OffOnDQN (and SB3's DQN), declared for type checkers
-    replay_buffer: ReplayBuffer | None
-    policy: Any  # DQNPolicy (SB3 declares it differently in BaseAlgorithm and DQN)
+    # Attributes and methods of OffOnDQN (and SB3's DQN), declared for type checkers (the rest: LambdaRefreshMixin)
     q_net: QNetwork
     q_net_target: QNetwork
-    device: th.device
-    logger: Logger
     gamma: float
-    batch_size: int
-    gradient_steps: int
-    train_freq: Any  # a TrainFreq once the model is set up
-    n_envs: int
-    target_update_interval: int
-    num_timesteps: int
-    max_grad_norm: float
-    loss: str
     mc_prob: float
     qlearning_prob: float
     mc_truncation: str
     lambda_block_size: int
-    lambda_refresh_interval: int | None
-    _n_calls: int
-    _n_updates: int
-    _vec_normalize_env: VecNormalize | None
-    _lambda_cache: LambdaReturnCache | None
-    _update_learning_rate: Callable[..., None]
-    _steps_per_chunk: Callable[[int], int]
-    _observation_bytes: Callable[[], int]
     _to_device: Callable[[np.ndarray], th.Tensor]
     _loss_fn: Callable[[], Callable[..., th.Tensor]]
     _bootstrap: Callable[[Any], tuple[th.Tensor, th.Tensor, th.Tensor]]
-    _parameter_list: Callable[[], list[th.nn.Parameter]]
 
-    def _train_on_lambda_returns(self, gradient_steps: int, batch_size: int) -> None:
-        """
-        ``gradient_steps`` updates of the Q-network towards the cached lambda-returns of ``mc_mixing="lambda"``.
+    def _lambda_chunk_tensors(
+        self, actions: np.ndarray, returns: np.ndarray, weights: np.ndarray | None
+    ) -> tuple[th.Tensor, th.Tensor, th.Tensor | None]:
+        """A chunk's actions and returns as columns (one Q-value per sample), and its importance weights likewise."""
+        weights_tensor = None if weights is None else self._to_device(weights.reshape(-1, 1))
+        return self._to_device(actions).long(), self._to_device(returns.reshape(-1, 1)), weights_tensor
 
-        The minibatches are drawn from the cache (refreshed first if the target network changed), gathered and uploaded
-        in chunks as in :meth:`train`; no target network runs here: the refresh ran it once for the whole cache.
-        """
-        assert isinstance(self.replay_buffer, OffOnBufferMixin)
-        self.policy.set_training_mode(True)
-        self._update_learning_rate(self.policy.optimizer)
+    def _lambda_step_loss(
+        self, observations: Any, actions: th.Tensor, targets: th.Tensor, weights: th.Tensor | None
+    ) -> tuple[th.Tensor, th.Tensor | None]:
+        """The Huber (or squared) loss of the taken actions' Q-values against the lambda-returns; the TD errors."""
+        current_q_values = th.gather(self.q_net(observations), dim=1, index=actions)
         loss_fn = self._loss_fn()
-        prioritized = isinstance(self.replay_buffer, PrioritizedBufferMixin)
-        if prioritized:
-            cache, entries, weights = self._draw_prioritized_lambda_entries(gradient_steps * batch_size)
-        else:
-            cache, entries = self._draw_lambda_entries(gradient_steps * batch_size)
-        errors = []
-        parameters = self._parameter_list()
-        losses = []
-        steps_per_chunk = self._steps_per_chunk(batch_size)
-        for first_step in range(0, gradient_steps, steps_per_chunk):
-            n_steps = min(steps_per_chunk, gradient_steps - first_step)
-            positions = slice(first_step * batch_size, (first_step + n_steps) * batch_size)
-            chunk = entries[positions]
-            observations, actions = self.replay_buffer.observations_and_actions(
-                cache.slots[chunk], cache.envs[chunk], self._vec_normalize_env
-            )
-            observations_tensor = obs_as_tensor(observations, self.device)
-            actions_tensor = self._to_device(actions).long()
-            targets = self._to_device(cache.returns[chunk].reshape(-1, 1))
-            if prioritized:
-                weights_tensor = self._to_device(weights[positions].reshape(-1, 1))
-            for step in range(n_steps):
-                rows = slice(step * batch_size, (step + 1) * batch_size)
-                current_q_values = self.q_net(rows_of(observations_tensor, rows))
-                current_q_values = th.gather(current_q_values, dim=1, index=actions_tensor[rows])
-                if prioritized:
-                    loss = (loss_fn(current_q_values, targets[rows], reduction="none") * weights_tensor[rows]).mean()
-                    errors.append((targets[rows] - current_q_values).detach())
-                else:
-                    loss = loss_fn(current_q_values, targets[rows])
-
-                self.policy.optimizer.zero_grad()
-                loss.backward()
-                th.nn.utils.clip_grad_norm_(parameters, self.max_grad_norm)
-                self.policy.optimizer.step()
-                losses.append(loss.detach())
-
-        self._n_updates += gradient_steps
-        self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
-        if prioritized:
-            self._update_lambda_priorities(cache, entries, th.cat(errors).cpu().numpy())
-        self.logger.record("train/loss", th.stack(losses).mean().item())
-        self.logger.record("train/lambda", cache.lam)
-        self.logger.record("train/trace_cut_fraction", cache.trace_cut_fraction)
+        if weights is None:
+            return loss_fn(current_q_values, targets), None
+        loss = (loss_fn(current_q_values, targets, reduction="none") * weights).mean()
+        return loss, (targets - current_q_values).detach()
 
     def _compute_lambda_cache(self, n_wanted: int, key: int) -> LambdaReturnCache:
         """The lambda-returns of about ``n_wanted`` stored transitions, with the target network of refresh ``key``."""

@@ -449,7 +449,7 @@ class OffOnDQN(
             super().train(gradient_steps, batch_size)
         # Each kind of target has its loop in its own mixin (coin_flip_targets.py, lambda_training.py)
         elif self.mc_mixing == "lambda":
-            self._train_on_lambda_returns(gradient_steps, batch_size)
+            self._train_on_lambda_cache(gradient_steps, batch_size)
         else:
             self._train_on_coin_flip_targets(gradient_steps, batch_size)
         self._check_training_loss()

@@ -6,14 +6,14 @@ from sb3_contrib.qrdqn.policies import CnnPolicy, MlpPolicy, MultiInputPolicy, Q
 from stable_baselines3.common.buffers import ReplayBuffer
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
-from stable_baselines3.common.utils import LinearSchedule, obs_as_tensor
+from stable_baselines3.common.utils import LinearSchedule
 
 from sb3_offon.common.buffers import OffOnBufferMixin
 from sb3_offon.common.non_finite import NON_FINITE_OPTIONS
 from sb3_offon.common.offon_model import OffOnReplayMixin, check_lambda_arguments, check_option
 from sb3_offon.common.prioritized_buffers import PrioritizedBufferMixin
 from sb3_offon.common.quantile_loss import WeightedQuantileHuberLoss, per_sample_quantile_huber_loss, quantile_huber_loss
-from sb3_offon.offon_dqn.chunks import ChunkedMinibatchesMixin, rows_of
+from sb3_offon.offon_dqn.chunks import ChunkedMinibatchesMixin
 from sb3_offon.offon_dqn.lambda_returns import LambdaReturnCache
 from sb3_offon.offon_dqn.lambda_training import LambdaRefreshMixin
 from sb3_offon.offon_qrdqn.quantile_lambda_returns import LAMBDA_FORMS, compute_quantile_lambda_returns
@@ -329,55 +329,36 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
         self.qlearning_prob = self.qlearning_schedule(self._current_progress_remaining)
         self.logger.record("train/mc_prob", self.mc_prob)
         self.logger.record("train/qlearning_prob", self.qlearning_prob)
-        self.policy.set_training_mode(True)
-        self._update_learning_rate(self.policy.optimizer)
-        prioritized = isinstance(self.replay_buffer, PrioritizedBufferMixin)
-        if prioritized:
+        if isinstance(self.replay_buffer, PrioritizedBufferMixin):
             self.replay_buffer.anneal_beta(self._current_progress_remaining)
             self.logger.record("train/per_beta", self.replay_buffer.beta)
-            cache, entries, weights = self._draw_prioritized_lambda_entries(gradient_steps * batch_size)
-        else:
-            cache, entries = self._draw_lambda_entries(gradient_steps * batch_size)
-        parameters = list(self.policy.parameters())
-        losses, errors = [], []
-        for first_step in range(0, gradient_steps, self._steps_per_chunk(batch_size)):
-            n_steps = min(self._steps_per_chunk(batch_size), gradient_steps - first_step)
-            positions = slice(first_step * batch_size, (first_step + n_steps) * batch_size)
-            chunk = entries[positions]
-            observations, actions = self.replay_buffer.observations_and_actions(
-                cache.slots[chunk], cache.envs[chunk], self._vec_normalize_env
-            )
-            observations_tensor = obs_as_tensor(observations, self.device)
-            actions_tensor = self._to_device(actions.reshape(-1, 1, 1)).long().expand(-1, self.n_quantiles, 1)
-            targets = self._to_device(cache.returns[chunk])
-            if prioritized:
-                weights_tensor = self._to_device(weights[positions])
-            for step in range(n_steps):
-                rows = slice(step * batch_size, (step + 1) * batch_size)
-                current_quantiles = self.quantile_net(rows_of(observations_tensor, rows))
-                current_quantiles = th.gather(current_quantiles, dim=2, index=actions_tensor[rows]).squeeze(dim=2)
-                if prioritized:
-                    # Importance-weighted; each sample's loss is its new priority (as Rainbow's per-sample KL)
-                    loss = WeightedQuantileHuberLoss.apply(current_quantiles, targets[rows], weights_tensor[rows])
-                    errors.append(per_sample_quantile_huber_loss(current_quantiles, targets[rows]))
-                else:
-                    loss = quantile_huber_loss(current_quantiles, targets[rows], sum_over_quantiles=True)
-
-                self.policy.optimizer.zero_grad()
-                loss.backward()
-                if self.max_grad_norm is not None:
-                    th.nn.utils.clip_grad_norm_(parameters, self.max_grad_norm)
-                self.policy.optimizer.step()
-                losses.append(loss.detach())
-
-        self._n_updates += gradient_steps
-        self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
-        if prioritized:
-            self._update_lambda_priorities(cache, entries, th.cat(errors).cpu().numpy())
-        self.logger.record("train/loss", th.stack(losses).mean().item())
-        self.logger.record("train/lambda", cache.lam)
-        self.logger.record("train/trace_cut_fraction", cache.trace_cut_fraction)
+        self._train_on_lambda_cache(gradient_steps, batch_size)
         self._check_training_loss()
+
+    def _parameter_list(self) -> list[th.nn.Parameter]:
+        """The policy's parameters, whose gradients are clipped (with ``max_grad_norm``)."""
+        return list(self.policy.parameters())
+
+    def _lambda_chunk_tensors(
+        self, actions: np.ndarray, returns: np.ndarray, weights: np.ndarray | None
+    ) -> tuple[th.Tensor, th.Tensor, th.Tensor | None]:
+        """A chunk's actions repeated over the quantiles (to gather them), its N target atoms per sample, its weights."""
+        actions_tensor = self._to_device(actions.reshape(-1, 1, 1)).long().expand(-1, self.n_quantiles, 1)
+        weights_tensor = None if weights is None else self._to_device(weights)
+        return actions_tensor, self._to_device(returns), weights_tensor
+
+    def _lambda_step_loss(
+        self, observations: Any, actions: th.Tensor, targets: th.Tensor, weights: th.Tensor | None
+    ) -> tuple[th.Tensor, th.Tensor | None]:
+        """
+        The quantile Huber loss of the taken actions' quantiles against the target atoms; with importance weights, each
+        sample's loss is also its error, its new priority (as Rainbow's per-sample KL).
+        """
+        current_quantiles = th.gather(self.quantile_net(observations), dim=2, index=actions).squeeze(dim=2)
+        if weights is None:
+            return quantile_huber_loss(current_quantiles, targets, sum_over_quantiles=True), None
+        loss = WeightedQuantileHuberLoss.apply(current_quantiles, targets, weights)
+        return loss, per_sample_quantile_huber_loss(current_quantiles, targets)
 
     def learn(
         self: SelfOffOnQRDQN,
