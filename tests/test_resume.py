@@ -229,6 +229,7 @@ def refused(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture, fold
     return lines[0]
 
 
+@pytest.mark.slow
 def test_resume_refuses_another_budget_algorithm_or_hyperparameters(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
 ) -> None:
@@ -253,6 +254,7 @@ def test_resume_refuses_another_budget_algorithm_or_hyperparameters(
         Checkpoint.latest(checkpoint).load_model(OffOnDQN, None)
 
 
+@pytest.mark.slow
 def test_resume_refuses_an_offon_dqn_checkpoint_with_algo_dqn(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
 ) -> None:
@@ -264,6 +266,7 @@ def test_resume_refuses_an_offon_dqn_checkpoint_with_algo_dqn(
     assert "the run was made with --algo offon_dqn, this command has --algo dqn" in line
 
 
+@pytest.mark.slow
 def test_a_damaged_checkpoint_falls_back_to_the_one_before(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
 ) -> None:
@@ -289,6 +292,7 @@ def test_a_damaged_checkpoint_falls_back_to_the_one_before(
     assert re.search(expected, refused(monkeypatch, capsys, tmp_path / "both", "dqn", "--resume", str(cut)))
 
 
+@pytest.mark.slow
 def test_a_run_resumes_from_the_checkpoint_before_a_damaged_one(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     with monkeypatch.context() as patch:
         interrupt_after_checkpoint(patch, 2000)
