@@ -277,14 +277,14 @@ def main() -> None:
         from sb3_offon.cli_args import use_tolerant_store_dict
         from sb3_offon.common.non_finite import NonFiniteError
         from sb3_offon.resume import CheckpointError
-        from sb3_offon.zoo import ALGO_SUMMARIES, ALGOS, UnknownHyperparameterError, register
+        from sb3_offon.zoo import ALGO_SUMMARIES, ALGOS, HyperparameterError, UnknownHyperparameterError, register
     register()
     describe_help(zoo_train, ALGOS, ALGO_SUMMARIES)
     # ``--hyperparams mc_mixing:convex``: unquoted strings (the zoo alone needs "mc_mixing:'convex'")
     use_tolerant_store_dict()
     sys.argv[1:] = one_thread_by_default(sys.argv[1:])
     flush_denormals_unless_kept(sys.argv[1:])
-    one_line = run_errors_in_one_line((UnknownHyperparameterError, CheckpointError), (NonFiniteError,))
+    one_line = run_errors_in_one_line((UnknownHyperparameterError, HyperparameterError, CheckpointError), (NonFiniteError,))
     with one_line, argument_errors_in_one_line(), unknown_env_in_one_line():
         zoo_train.train()
 

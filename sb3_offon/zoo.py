@@ -21,6 +21,7 @@ import difflib
 import inspect
 import json
 import shutil
+import traceback
 import warnings
 from pathlib import Path
 from typing import Any
@@ -132,6 +133,19 @@ class UnknownHyperparameterError(ValueError):
     """A hyperparameter (YAML entry or ``--hyperparams``) that is neither the zoo's nor an argument of the algorithm."""
 
 
+class HyperparameterError(ValueError):
+    """A ``ValueError`` the algorithm's constructor raised for the hyperparameters it was given."""
+
+
+def raised_by_a_constructor(error: BaseException) -> bool:
+    """Whether ``error`` was raised while an algorithm was being built (a frame of ``__init__`` of a ``BaseAlgorithm``)."""
+    frame_and_lines = traceback.walk_tb(error.__traceback__)
+    return any(
+        frame.f_code.co_name == "__init__" and isinstance(frame.f_locals.get("self"), BaseAlgorithm)
+        for frame, _ in frame_and_lines
+    )
+
+
 def constructor_arguments(algo_class: type) -> set[str] | None:
     """
     The keyword arguments ``algo_class(...)`` takes: its ``__init__``'s, and its bases' as far as each passes
@@ -232,9 +246,12 @@ class OffOnExperimentManager(ExperimentManager):
         run_folder_existed = Path(self.save_path).exists()
         try:
             results = super().setup_experiment()
-        except BaseException:
+        except BaseException as error:
             if not run_folder_existed:
                 shutil.rmtree(self.save_path, ignore_errors=True)
+            if isinstance(error, ValueError) and type(error) is not HyperparameterError and raised_by_a_constructor(error):
+                # What the algorithm refused, in the line the command line prints (sb3_offon.train)
+                raise HyperparameterError(f"invalid hyperparameter (--hyperparams or the YAML file): {error}") from error
             raise
         if results is None or self.resumed_from is None:
             return results

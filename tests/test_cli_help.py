@@ -118,6 +118,9 @@ def test_an_unknown_env_is_one_line_with_close_matches() -> None:
          "close matches: learning_rate"),
         ("qrdqn", ["policy_kwargs:dict(n_quantiles=0)"], "`n_quantiles` must be a positive integer, got 0"),
         ("offon_qrdqn", ["buffer_size:0"], "`buffer_size` must be a positive integer, got 0"),
+        # SB3's own check, in its constructor
+        ("dqn", ["optimize_memory_usage:True"], "invalid hyperparameter (--hyperparams or the YAML file): ReplayBuffer "
+         "does not support optimize_memory_usage = True and handle_timeout_termination = True simultaneously"),
     ],
 )  # fmt: skip
 def test_a_bad_hyperparameter_is_one_line_and_leaves_no_run_folder(
