@@ -13,6 +13,7 @@ from stable_baselines3.common.env_util import make_vec_env
 
 from sb3_offon import OffOnDQN, OffOnQRDQN
 from sb3_offon.common.non_finite import NonFiniteCheck, NonFiniteError, non_finite_rewards
+from sb3_offon.common.prioritized_buffers import PrioritizedOffOnReplayBuffer
 from sb3_offon.qrdqn import QRDQN
 
 SMALL = dict(learning_starts=50, buffer_size=1_000, batch_size=16, train_freq=4, target_update_interval=100, seed=0)
@@ -149,6 +150,16 @@ def test_a_non_finite_loss_stops_training_at_its_training_call(name: str) -> Non
     with th.no_grad():
         next(model.policy.parameters()).fill_(float("nan"))
     with pytest.raises(NonFiniteError, match=r"training loss nan at step 6\d"):
+        model.learn(20, reset_num_timesteps=False)
+
+
+@pytest.mark.parametrize("algo", [OffOnDQN, OffOnQRDQN])
+def test_with_prioritised_replay_a_non_finite_error_is_no_priority(algo) -> None:
+    model = algo("MlpPolicy", "CartPole-v1", replay_buffer_class=PrioritizedOffOnReplayBuffer, **SMALL)
+    model.learn(60)
+    with th.no_grad():
+        next(model.policy.parameters()).fill_(float("nan"))
+    with pytest.raises(NonFiniteError, match=r"Non-finite training error \(NaN or inf\) for a priority: the values diverged"):
         model.learn(20, reset_num_timesteps=False)
 
 

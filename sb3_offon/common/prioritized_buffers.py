@@ -38,6 +38,7 @@ from sb3_offon.common.buffers import (
     OffOnReplayBufferSamples,
     reward_scale,
 )
+from sb3_offon.common.non_finite import NonFiniteError
 from sb3_offon.common.sum_tree import SumTree
 
 
@@ -132,7 +133,10 @@ class PrioritizedBufferMixin(OffOnBufferMixin):
         """
         priorities = np.abs(np.asarray(errors, dtype=np.float64).reshape(-1)) + self.epsilon
         if not np.all(np.isfinite(priorities)):
-            raise ValueError("prioritised replay: a non-finite error (NaN or inf) cannot be a priority")
+            raise NonFiniteError(
+                "Non-finite training error (NaN or inf) for a priority: the values diverged; lower the learning rate or "
+                "scale the rewards"
+            )
         leaves = self.leaves(slots, envs)
         if len(leaves) != len(priorities) or (len(leaves) and (leaves.min() < 0 or leaves.max() >= len(self._tree))):
             raise ValueError("prioritised replay: one error per stored transition (slot < buffer_size, env < n_envs)")
