@@ -274,11 +274,12 @@ def test_weighted_quantile_loss_with_unit_weights_is_the_loss():
     targets = th.randn(8, 5) * 2
     plain = quantile_huber_loss(current, targets)
     (plain_gradient,) = th.autograd.grad(plain, current)
-    weighted = WeightedQuantileHuberLoss.apply(current, targets, th.ones(8))
+    weighted, errors = WeightedQuantileHuberLoss.apply(current, targets, th.ones(8))
     (weighted_gradient,) = th.autograd.grad(weighted, current)
     th.testing.assert_close(weighted, plain)
     th.testing.assert_close(weighted_gradient, plain_gradient)
     weights = th.rand(8)
     per_sample = per_sample_quantile_huber_loss(current, targets)
-    th.testing.assert_close(WeightedQuantileHuberLoss.apply(current, targets, weights), (weights * per_sample).mean())
+    th.testing.assert_close(WeightedQuantileHuberLoss.apply(current, targets, weights)[0], (weights * per_sample).mean())
+    assert th.equal(errors, per_sample) and not errors.requires_grad
     th.testing.assert_close(per_sample.mean(), plain.detach())

@@ -85,21 +85,27 @@ class WeightedQuantileHuberLoss(th.autograd.Function):
     """
     QR-DQN's quantile Huber loss with a weight per sample (prioritised replay's importance weights): the mean over the
     batch of weight x (the sample's cost summed over the current quantiles, averaged over the targets). With unit
-    weights, the value and gradient of :class:`QuantileHuberLoss`.
+    weights, the value and gradient of :class:`QuantileHuberLoss`. Its second output is each sample's unweighted loss
+    (what prioritised replay takes as the sample's error, as :func:`per_sample_quantile_huber_loss` computes it), from
+    the same pass, without a gradient.
     """
 
     @staticmethod
-    def forward(ctx: Any, current_quantiles: th.Tensor, target_quantiles: th.Tensor, weights: th.Tensor) -> th.Tensor:
+    def forward(
+        ctx: Any, current_quantiles: th.Tensor, target_quantiles: th.Tensor, weights: th.Tensor
+    ) -> tuple[th.Tensor, th.Tensor]:
         batch_size, _ = current_quantiles.shape
         n_targets = target_quantiles.shape[-1]
         costs, slopes = _quantile_costs_and_slopes(current_quantiles, target_quantiles)
         weights = weights.detach().double().reshape(-1, 1)
         scale = batch_size * n_targets
         ctx.save_for_backward((weights * slopes / scale).to(current_quantiles.dtype))
-        return ((weights * costs).sum() / scale).to(current_quantiles.dtype)
+        per_sample = (costs.sum(dim=1) / n_targets).to(current_quantiles.dtype)
+        ctx.mark_non_differentiable(per_sample)
+        return ((weights * costs).sum() / scale).to(current_quantiles.dtype), per_sample
 
     @staticmethod
-    def backward(ctx: Any, grad_output: th.Tensor) -> tuple[th.Tensor, None, None]:
+    def backward(ctx: Any, grad_output: th.Tensor, _grad_per_sample: th.Tensor) -> tuple[th.Tensor, None, None]:
         (gradient,) = ctx.saved_tensors
         return grad_output * gradient, None, None
 

@@ -12,7 +12,7 @@ from sb3_offon.common.buffers import OffOnBufferMixin
 from sb3_offon.common.non_finite import NON_FINITE_OPTIONS
 from sb3_offon.common.offon_model import OffOnReplayMixin, check_lambda_arguments, check_option
 from sb3_offon.common.prioritized_buffers import PrioritizedBufferMixin
-from sb3_offon.common.quantile_loss import WeightedQuantileHuberLoss, per_sample_quantile_huber_loss, quantile_huber_loss
+from sb3_offon.common.quantile_loss import WeightedQuantileHuberLoss, quantile_huber_loss
 from sb3_offon.offon_dqn.chunks import ChunkedMinibatchesMixin
 from sb3_offon.offon_dqn.lambda_returns import LambdaReturnCache
 from sb3_offon.offon_dqn.lambda_training import LambdaRefreshMixin
@@ -357,8 +357,8 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
         current_quantiles = th.gather(self.quantile_net(observations), dim=2, index=actions).squeeze(dim=2)
         if weights is None:
             return quantile_huber_loss(current_quantiles, targets, sum_over_quantiles=True), None
-        loss = WeightedQuantileHuberLoss.apply(current_quantiles, targets, weights)
-        return loss, per_sample_quantile_huber_loss(current_quantiles, targets)
+        loss, per_sample = WeightedQuantileHuberLoss.apply(current_quantiles, targets, weights)
+        return loss, per_sample
 
     def learn(
         self: SelfOffOnQRDQN,
