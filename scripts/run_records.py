@@ -8,6 +8,7 @@ import fcntl
 import json
 import os
 import shutil
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -74,21 +75,28 @@ def checkpoint_settings(spec: dict) -> dict:
 
 def resume_point(spec: dict) -> list[int]:
     """
-    The steps at which the run of ``spec`` has resumed so far, the one it would resume at now last, read from its
-    checkpoint folder (:mod:`sb3_offon.resume`'s layout: ``latest`` names the newest checkpoint, whose
-    ``checkpoint.json`` holds its step); ``[]`` when the run writes no checkpoints or has none made with its settings.
+    The steps at which the run of ``spec`` has resumed so far, the one it would resume at now last: those of the newest
+    complete checkpoint in its folder, the one ``--resume`` takes (:meth:`sb3_offon.resume.Checkpoint.latest`: a damaged
+    newer one is passed over); ``[]`` when the run writes no checkpoints or has none complete made with its settings.
     """
     if not spec.get("checkpoint_dir"):
         return []
     folder = Path(spec["checkpoint_dir"])
-    recorded, latest = folder / "spec.json", folder / "latest"
     try:
-        if json.loads(recorded.read_text()) != checkpoint_settings(spec):
+        if json.loads((folder / "spec.json").read_text()) != checkpoint_settings(spec):
             return []
-        state = json.loads((folder / latest.read_text().strip() / "checkpoint.json").read_text())
     except (OSError, ValueError):
         return []
-    return [*state["resumed_at"], state["num_timesteps"]]
+    # Imported here, where a checkpoint exists: the rest of the records are read without importing torch
+    from sb3_offon.resume import Checkpoint, CheckpointError
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the resumed run warns about the damaged checkpoints itself
+        try:
+            checkpoint = Checkpoint.latest(folder)
+        except CheckpointError:
+            return []
+    return [*checkpoint.resumed_at, checkpoint.num_timesteps] if checkpoint is not None else []
 
 
 def start_checkpoints(folder: Path, spec: dict) -> None:

@@ -232,6 +232,18 @@ def test_an_interrupted_run_resumes_from_its_checkpoint(tmp_path: Path, monkeypa
         train_main()
     assert module.resume_point(spec) == [200]
     assert module.resume_point({**spec, "eval_episodes": 3}) == []  # made with other settings: not resumed
+    # A damaged newest checkpoint: the run resumes from the one before, and says so
+    model = folder / "200" / "model.zip"
+    intact = model.read_bytes()
+    model.write_bytes(intact[: len(intact) // 2])
+    assert module.resume_point(spec) == [100]
+    older = folder / "100" / "checkpoint.json"
+    older_state = older.read_text()
+    older.unlink()
+    assert module.resume_point(spec) == []  # none complete: the run starts afresh
+    older.write_text(older_state)
+    model.write_bytes(intact)
+    assert module.resume_point(spec) == [200]
     assert "(resumes at step 200)" in check(benchmark(root, *arguments, "--dry-run"))
     output = check(benchmark(root, *arguments))
     assert "(resumed at step 200)" in output

@@ -80,6 +80,15 @@ def train(monkeypatch: pytest.MonkeyPatch, folder: Path, algo: str, *extra: str,
     return run
 
 
+def interrupted(
+    monkeypatch: pytest.MonkeyPatch, folder: Path, algo: str, *extra: str, after: int, hyperparams: tuple[str, ...] = ()
+) -> Path:
+    """:func:`train`, cut short by Ctrl-C just after its first checkpoint at or after step ``after``; the run's log folder."""
+    with monkeypatch.context() as patch:
+        interrupt_after_checkpoint(patch, after)
+        return train(patch, folder, algo, *extra, hyperparams=hyperparams)
+
+
 def monitor_rows(path: Path) -> list[list[float]]:
     return [[float(cell) for cell in line.split(",")] for line in path.read_text().splitlines()[2:]]
 
@@ -93,9 +102,7 @@ def test_an_interrupted_run_resumes_as_the_uninterrupted_one_goes(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, algo: str, algo_class: type[DQN]
 ) -> None:
     whole = train(monkeypatch, tmp_path / "whole", algo)
-    with monkeypatch.context() as patch:
-        interrupt_after_checkpoint(patch, 2000)
-        cut = train(patch, tmp_path / "cut", algo)
+    cut = interrupted(monkeypatch, tmp_path / "cut", algo, after=2000)
     checkpoint = Checkpoint.latest(cut / "checkpoint")
     # CartPole's settings collect 256 steps between gradient phases: the checkpoint is at the rollout start after 2000
     assert checkpoint is not None and checkpoint.num_timesteps == 2048 and checkpoint.total_timesteps == BUDGET
@@ -183,9 +190,7 @@ def test_the_resumed_model_is_the_checkpointed_one(tmp_path: Path, monkeypatch: 
 def test_two_envs_resume_with_both_monitor_files(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     two = ("n_envs:2",)
     whole = train(monkeypatch, tmp_path / "whole", "offon_dqn", hyperparams=two)
-    with monkeypatch.context() as patch:
-        interrupt_after_checkpoint(patch, 2000)
-        cut = train(patch, tmp_path / "cut", "offon_dqn", hyperparams=two)
+    cut = interrupted(monkeypatch, tmp_path / "cut", "offon_dqn", hyperparams=two, after=2000)
     # Two envs collect 2 x 256 steps between gradient phases
     checkpoint = Checkpoint.latest(cut / "checkpoint")
     assert checkpoint is not None and checkpoint.num_timesteps == 2048
@@ -207,9 +212,7 @@ def test_two_envs_resume_with_both_monitor_files(tmp_path: Path, monkeypatch: py
 
 def test_a_normalised_env_resumes_with_its_statistics(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     normalised = ("normalize:True",)
-    with monkeypatch.context() as patch:
-        interrupt_after_checkpoint(patch, 2000)
-        cut = train(patch, tmp_path / "cut", "dqn", hyperparams=normalised)
+    cut = interrupted(monkeypatch, tmp_path / "cut", "dqn", hyperparams=normalised, after=2000)
     resumed = train(monkeypatch, tmp_path / "resumed", "dqn", "--resume", str(cut), hyperparams=normalised)
     with open(resumed / "CartPole-v1" / "vecnormalize.pkl", "rb") as file:
         statistics = pickle.load(file)
@@ -233,9 +236,7 @@ def refused(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture, fold
 def test_resume_refuses_another_budget_algorithm_or_hyperparameters(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
 ) -> None:
-    with monkeypatch.context() as patch:
-        interrupt_after_checkpoint(patch, 1000)
-        cut = train(patch, tmp_path / "cut", "dqn")
+    cut = interrupted(monkeypatch, tmp_path / "cut", "dqn", after=1000)
     state = json.loads((cut / "checkpoint" / "1024" / "checkpoint.json").read_text())
     assert state["num_timesteps"] == 1024 and state["resumed_at"] == []
     assert state["algorithm"] == "DQN" and state["run_config"]["algo"] == "dqn"
@@ -259,9 +260,7 @@ def test_resume_refuses_an_offon_dqn_checkpoint_with_algo_dqn(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
 ) -> None:
     # Before, `--algo dqn` loaded dqn.yml and went on as SB3's DQN from OffOnDQN's checkpoint, the budget alone checked
-    with monkeypatch.context() as patch:
-        interrupt_after_checkpoint(patch, 1000)
-        cut = train(patch, tmp_path / "cut", "offon_dqn")
+    cut = interrupted(monkeypatch, tmp_path / "cut", "offon_dqn", after=1000)
     line = refused(monkeypatch, capsys, tmp_path / "other", "dqn", "--resume", str(cut))
     assert "the run was made with --algo offon_dqn, this command has --algo dqn" in line
 
@@ -270,9 +269,7 @@ def test_resume_refuses_an_offon_dqn_checkpoint_with_algo_dqn(
 def test_a_damaged_checkpoint_falls_back_to_the_one_before(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
 ) -> None:
-    with monkeypatch.context() as patch:
-        interrupt_after_checkpoint(patch, 2000)
-        cut = train(patch, tmp_path / "cut", "dqn")
+    cut = interrupted(monkeypatch, tmp_path / "cut", "dqn", after=2000)
     folder = cut / "checkpoint"
     assert sorted(path.name for path in folder.iterdir()) == ["1024", "2048", "latest"], "the two newest kept"
     newest, before = folder / "2048", folder / "1024"
@@ -294,9 +291,7 @@ def test_a_damaged_checkpoint_falls_back_to_the_one_before(
 
 @pytest.mark.slow
 def test_a_run_resumes_from_the_checkpoint_before_a_damaged_one(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    with monkeypatch.context() as patch:
-        interrupt_after_checkpoint(patch, 2000)
-        cut = train(patch, tmp_path / "cut", "dqn")
+    cut = interrupted(monkeypatch, tmp_path / "cut", "dqn", after=2000)
     with open(cut / "checkpoint" / "2048" / "replay_buffer.pkl", "r+b") as file:
         file.truncate(100)
     fallback_monitor = (cut / "checkpoint" / "1024" / "0.monitor.csv").read_text()
@@ -313,9 +308,7 @@ def test_a_run_resumed_after_its_last_evaluation_keeps_them(tmp_path: Path, monk
     # A budget of 3,500 steps evaluated every 1,000: cut after the checkpoint at 3,072, the resumed part evaluates no
     # more, and its file must still hold the three evaluations made before the cut
     budget = ("-n", "3500")
-    with monkeypatch.context() as patch:
-        interrupt_after_checkpoint(patch, 3000)
-        cut = train(patch, tmp_path / "cut", "dqn", *budget)
+    cut = interrupted(monkeypatch, tmp_path / "cut", "dqn", *budget, after=3000)
     assert Checkpoint.latest(cut / "checkpoint").num_timesteps == 3072
     before = np.load(cut / "evaluations.npz")
     resumed = train(monkeypatch, tmp_path / "resumed", "dqn", "--resume", str(cut), *budget)
@@ -342,9 +335,7 @@ def test_a_run_its_stop_rule_ends_is_finished(tmp_path: Path, monkeypatch: pytes
 
 def test_a_resumed_run_keeps_its_stop_rule_window(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     never = (stop_rule(10**9, 100),)
-    with monkeypatch.context() as patch:
-        interrupt_after_checkpoint(patch, 2000)
-        cut = train(patch, tmp_path / "cut", "dqn", hyperparams=never)
+    cut = interrupted(monkeypatch, tmp_path / "cut", "dqn", hyperparams=never, after=2000)
     assert not (cut / "stopped.json").exists(), "cut short by Ctrl-C, not ended by its rule"
     checkpoint = Checkpoint.latest(cut / "checkpoint")
     ((name, state),) = checkpoint.callback_states
