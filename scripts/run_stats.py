@@ -13,6 +13,8 @@ The definitions are written out in ``scripts/plot.py``'s docstring, which report
 
 import json
 import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -117,6 +119,18 @@ def algo_order(algo: str) -> tuple[int, str]:
 
 def label(algo: str) -> str:
     return LABELS.get(algo, algo)
+
+
+@contextmanager
+def labels_of(labels: dict[str, str]) -> Iterator[None]:
+    """Inside this block, :func:`label` names algorithms as ``labels`` says where it does (a study's own names)."""
+    usual = dict(LABELS)
+    LABELS.update(labels)
+    try:
+        yield
+    finally:
+        LABELS.clear()
+        LABELS.update(usual)
 
 
 def threshold(env: str) -> float | None:

@@ -7,21 +7,22 @@ What a study file holds: ``scripts/study_file.py``; its rule's criteria and verd
 ``scripts/plot.py``'s (per-env tables with steps to threshold, the paper's figures, aggregates) and the verdict, if the
 study has a rule, in ``verdict.md``. A ``setup_check`` block (``algo``, ``seeds``, ``name``) is judged with
 ``--setup-check``: the algorithm's final evaluation episodes against a random policy's return (``--random``, from
-``scripts/random_policy.py``). ``--seeds`` judges and reports the study on some of its seeds only, into a folder of
-their own: an interim look while runs are missing (the seeds every algorithm has finished on every env), marked as such
-in its table; the study's verdict is the one on all its seeds.
+``scripts/random_policy.py``). ``--seeds`` and ``--envs`` judge and report the study on some of its seeds or envs
+only, into a folder of their own: an interim look while runs are missing (the seeds, or the envs, on which every
+algorithm has finished), marked as such in its table; the study's verdict is the one on all its seeds and envs.
 
 Usage::
 
     python scripts/study.py benchmarks/minatar.yml                # tables, figures and verdict into results/minatar/
     python scripts/study.py benchmarks/minatar.yml --setup-check --random results/minatar/random_policy.json
     python scripts/study.py benchmarks/minatar.yml --seeds 40 41 42 43   # into results/minatar/seeds_40_41_42_43/
+    python scripts/study.py benchmarks/classic_qr.yml --envs CartPole-v1 Acrobot-v1   # results/classic_qr/envs_.../
 """
 
 import argparse
 import json
 import sys
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import matplotlib
@@ -42,7 +43,7 @@ from rule import (
     verdict,
 )
 from run_records import env_folder
-from run_stats import evaluation_curves, mean_ci
+from run_stats import evaluation_curves, labels_of, mean_ci
 from scipy import stats
 from study_file import MINMAX, Study
 
@@ -88,10 +89,46 @@ def difference_table(study: Study, scores: dict) -> list[str]:
     return lines
 
 
-def command(study: Study, seeds: list[int] | None = None) -> str:
-    """The command line that writes the report: the study file, and the seeds where the report is on some of them."""
-    subset = f" --seeds {' '.join(map(str, seeds))}" if seeds else ""
-    return f"python scripts/study.py {study.path.as_posix()}{subset}"
+@dataclass(frozen=True)
+class Interim:
+    """What an interim look narrows a study to: some of its seeds, some of its envs, or both (None: all of them)."""
+
+    seeds: list[int] | None = None
+    envs: list[str] | None = None
+
+    def arguments(self) -> str:
+        """The command-line arguments that ask for this look."""
+        seeds = f" --seeds {' '.join(map(str, self.seeds))}" if self.seeds else ""
+        return seeds + (f" --envs {' '.join(self.envs)}" if self.envs else "")
+
+    def words(self) -> str:
+        """This look in words: ``seeds 1, 2``, ``CartPole-v1, Acrobot-v1`` or ``seeds 1, 2 on CartPole-v1``."""
+        seeds = f"seeds {', '.join(map(str, self.seeds))}" if self.seeds else ""
+        envs = ", ".join(self.envs) if self.envs else ""
+        return f"{seeds} on {envs}" if seeds and envs else seeds or envs
+
+    def folder(self) -> str:
+        """Its report's folder name: ``seeds_1_2``, ``envs_CartPole-v1_Acrobot-v1``, or both joined by ``_``."""
+        parts = [f"seeds_{'_'.join(map(str, self.seeds))}"] if self.seeds else []
+        return "_".join([*parts, *([f"envs_{'_'.join(map(env_folder, self.envs))}"] if self.envs else [])])
+
+
+def command(study: Study, interim: Interim | None = None) -> str:
+    """The command line that writes the report: the study file, and what an interim look narrows it to."""
+    return f"python scripts/study.py {study.path.as_posix()}{interim.arguments() if interim else ''}"
+
+
+def env_subset(study: Study, envs: list[str]) -> Study:
+    """``study`` on ``envs`` only (each one of its envs, kept in the study's order; a fixed normalisation narrowed too)."""
+    if study.candidates:
+        raise ValueError(f"{study.path}: --envs applies to a study without candidates")
+    unknown = sorted(set(envs) - set(study.envs))
+    if unknown:
+        raise ValueError(f"--envs: {', '.join(unknown)} not among the study's envs {study.envs}")
+    normalisation = study.normalisation
+    if isinstance(normalisation, dict):
+        normalisation = {env: low_high for env, low_high in normalisation.items() if env in envs}
+    return replace(study, envs=[env for env in study.envs if env in envs], normalisation=normalisation)
 
 
 def seed_subset(study: Study, seeds: list[int]) -> Study:
@@ -118,13 +155,13 @@ def seed_subset(study: Study, seeds: list[int]) -> Study:
 
 
 def rule_lines(
-    study: Study, runs: dict, scores: dict, decision: str, lines: list[str], subset: list[int] | None = None
+    study: Study, runs: dict, scores: dict, decision: str, lines: list[str], interim: Interim | None = None
 ) -> list[str]:
     """
-    The verdict, the rule's criteria and the same criteria against ``also_against``, as Markdown lines. On some seeds
-    only (``subset``) the rule's outcome is named as on those seeds, not as the study's verdict.
+    The verdict, the rule's criteria and the same criteria against ``also_against``, as Markdown lines. In an interim
+    look (``interim``) the rule's outcome is named as on its seeds or envs only, not as the study's verdict.
     """
-    outcome = f"On seeds {', '.join(map(str, subset))} only: {decision}" if subset else f"Verdict: {decision}"
+    outcome = f"On {interim.words()} only: {decision}" if interim else f"Verdict: {decision}"
     text = [
         f"**{outcome}.** The rule (`{study.path.as_posix()}`), stated {study.stated}, for {study.label(study.candidate)}:",
         "",
@@ -138,24 +175,32 @@ def rule_lines(
     return text
 
 
-def report(study: Study, root: Path, out: Path, subset: list[int] | None = None) -> str:
+def report(study: Study, root: Path, out: Path, interim: Interim | None = None) -> str:
     """
-    Write the study's tables, figures and verdict into ``out``; return the verdict. ``subset``: the seeds ``study`` was
-    narrowed to (:func:`seed_subset`), named in the table as an interim look.
+    Write the study's tables, figures and verdict into ``out``; return the verdict. ``interim``: the seeds or envs
+    ``study`` was narrowed to (:func:`seed_subset`, :func:`env_subset`), named in the table as an interim look.
     """
     runs, scores = study_runs(study, root)
     if study.candidates:
         return selection.report(study, runs, scores, out, command(study))
     out.mkdir(parents=True, exist_ok=True)
     decision, lines = verdict(study, runs, scores)
-    interim = (
+    caveats = [
+        *(
+            ["Bootstrap intervals over a few seeds are too narrow: they resample only the seeds there are."]
+            if interim and interim.seeds
+            else []
+        ),
+        *(["Aggregates over some of the envs are not the study's."] if interim and interim.envs else []),
+    ]
+    interim_note = (
         [
-            f"An interim look at seeds {', '.join(map(str, subset))} only, not the study's verdict, which is on all its "
-            f"seeds (`{command(study)}`). Bootstrap intervals over a few seeds are too narrow: they resample only the "
-            "seeds there are.",
+            f"An interim look at {interim.words()} only, not the study's verdict, which is on all its "
+            f"{' and '.join(name for name, narrowed in (('seeds', interim.seeds), ('envs', interim.envs)) if narrowed)} "
+            f"(`{command(study)}`). {' '.join(caveats)}",
             "",
         ]
-        if subset
+        if interim
         else []
     )
     if study.tables == "benchmark":
@@ -165,23 +210,24 @@ def report(study: Study, root: Path, out: Path, subset: list[int] | None = None)
             out=out,
             last=study.final_evaluations,
             reps=study.reps_iqm,
-            command=command(study, subset),
+            command=command(study, interim),
         )
-        plot.report(options, runs)
+        with labels_of(study.labels):  # the tables name algorithms as the verdict does
+            plot.report(options, runs)
         if study.rule:
-            header = f"<!-- Generated by {command(study, subset)}: do not edit by hand. -->"
-            body = [*interim, *rule_lines(study, runs, scores, decision, lines, subset)]
+            header = f"<!-- Generated by {command(study, interim)}: do not edit by hand. -->"
+            body = [*interim_note, *rule_lines(study, runs, scores, decision, lines, interim)]
             (out / "verdict.md").write_text("\n".join([header, f"# {study.name}: verdict", "", *body]) + "\n")
         return decision
     n_runs = sum(len(by_algo.get(algo, [])) for by_algo in runs.values() for algo in study.algos)
     text = [
-        f"<!-- Generated by {command(study, subset)}: do not edit by hand. -->",
+        f"<!-- Generated by {command(study, interim)}: do not edit by hand. -->",
         f"# {study.name}: {n_runs} of {len(study.algos) * len(study.envs) * len(study.seeds)} runs",
         "",
-        *interim,
+        *interim_note,
         f"Seeds {', '.join(map(str, study.seeds))}; 95% intervals; in brackets after each cell, the runs it averages.",
         "",
-        *rule_lines(study, runs, scores, decision, lines, subset),
+        *rule_lines(study, runs, scores, decision, lines, interim),
     ]
     text += ["", "## Final return (mean of the last evaluations)", "", *per_env_table(study, runs, scores, "final")]
     text += ["", "## AUC (mean evaluation return over training)", "", *per_env_table(study, runs, scores, "auc")]
@@ -295,21 +341,31 @@ def main(argv: list[str] | None = None) -> str:
         default=None,
         help="report on these of the study's seeds only, an interim look (default folder: results/<study>/seeds_<seeds>)",
     )
+    parser.add_argument(
+        "--envs",
+        nargs="+",
+        default=None,
+        help="report on these of the study's envs only, an interim look (default folder: results/<study>/envs_<envs>)",
+    )
     args = parser.parse_args(argv)
     study = Study.read(args.study)
     out = args.out or Path(study.out or Path("results") / study.name)
-    if args.seeds:
+    if args.seeds or args.envs:
         if args.setup_check:
-            parser.error("--seeds does not apply to --setup-check (its seeds are the check's own)")
+            parser.error("--seeds and --envs do not apply to --setup-check (its seeds and envs are the check's own)")
+        narrowed = study
         try:
-            narrowed = seed_subset(study, args.seeds)
+            if args.envs:
+                narrowed = env_subset(narrowed, args.envs)
+            if args.seeds:
+                narrowed = seed_subset(narrowed, args.seeds)
         except ValueError as error:
             parser.error(str(error))
         # Named by the seeds asked for: a seed of one env's ``seeds_on`` only is not among the narrowed study's ``seeds``
-        seeds = sorted(set(args.seeds))
-        out = args.out or out / f"seeds_{'_'.join(map(str, seeds))}"
-        decision = report(narrowed, args.root, out, subset=seeds)
-        print(f"{study.name}, seeds {', '.join(map(str, seeds))} only (interim): {decision}")
+        interim = Interim(seeds=sorted(set(args.seeds)) if args.seeds else None, envs=narrowed.envs if args.envs else None)
+        out = args.out or out / interim.folder()
+        decision = report(narrowed, args.root, out, interim)
+        print(f"{study.name}, {interim.words()} only (interim): {decision}")
         return decision
     if args.setup_check:
         if args.random is None:
