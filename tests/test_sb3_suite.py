@@ -1,16 +1,18 @@
 """
-Stable-Baselines3's own tests of DQN, run with OffOnDQN in place of DQN.
+The libraries' own tests, run with this package's drop-ins: Stable-Baselines3's tests of DQN with OffOnDQN in place of
+DQN, and sb3-contrib's tests of QR-DQN with OffOnQRDQN, and with ``sb3_offon.qrdqn.QRDQN``, in place of QRDQN.
 
-SB3's test code is not part of this repository: the test downloads the sdist of the installed stable-baselines3 from
-PyPI (``pip download``), keeps its ``tests/`` folder and its pytest configuration in a cache folder, and runs the test
-files that exercise DQN in a pytest subprocess with the plugin ``tests/sb3_suite/sb3_offon_plugin.py``, which swaps
-``stable_baselines3.DQN`` for ``OffOnDQN`` and selects the tests that exercise DQN (see its docstring: one test, which
-reads the tensorboard run folder by DQN's run name, runs with that run name).
+Their test code is not part of this repository: the test downloads the sdist of the installed library from PyPI
+(``pip download``), keeps its ``tests/`` folder and its pytest configuration in a cache folder, and runs the test
+files that exercise the original algorithm in a pytest subprocess with the plugin
+``tests/sb3_suite/sb3_offon_plugin.py``, which swaps the original for the drop-in and selects the tests that exercise
+it (see its docstring: one SB3 test, which reads the tensorboard run folder by DQN's run name, runs with that run name).
 
-- Select it with ``pytest -m sb3_suite``; leave it out with ``-m "not sb3_suite"``.
+- Select them with ``pytest -m sb3_suite``; leave them out with ``-m "not sb3_suite"``.
 - The cache is ``$SB3_OFFON_CACHE`` if set, else ``~/.cache/sb3-offon``; a cached copy is reused.
-- Without network (or without PyPI) the test fails: set ``SB3_OFFON_SKIP_SB3_SUITE=1`` to skip it instead.
-- By hand: ``python tests/test_sb3_suite.py [pytest args]`` runs the same subprocess, printing its output.
+- Without network (or without PyPI) the tests fail: set ``SB3_OFFON_SKIP_SB3_SUITE=1`` to skip them instead.
+- By hand: ``python tests/test_sb3_suite.py [OffOnDQN|OffOnQRDQN|QRDQN] [pytest args]`` runs the same subprocess,
+  printing its output.
 """
 
 import importlib.util
@@ -21,9 +23,11 @@ import sys
 import tarfile
 import tempfile
 import xml.etree.ElementTree as ET
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+import sb3_contrib
 import stable_baselines3
 
 PLUGIN_DIR = Path(__file__).resolve().parent / "sb3_suite"
@@ -48,10 +52,40 @@ SB3_TEST_FILES: dict[str, tuple[str, ...]] = {
     # Imports ale_py at module level, for its Atari tests; its DQN test is test_policy_is_vectorized_obs
     "test_utils.py": ("ale_py",),
 }
+# sb3-contrib's test files that exercise QRDQN (``grep -l QRDQN tests/*.py`` on sb3-contrib 2.9)
+CONTRIB_TEST_FILES: dict[str, tuple[str, ...]] = {
+    name: ()
+    for name in (
+        "test_cnn.py",
+        "test_deterministic.py",
+        "test_dict_env.py",
+        "test_identity.py",
+        "test_run.py",
+        "test_save_load.py",
+        "test_train_eval_mode.py",
+    )
+}
 
-# The run must have passed at least this many tests, so that it cannot pass by collecting nothing
-# (SB3 2.9.2: 74 selected, 68 passed, 6 skipped; 67 passed without ale_py).
-MIN_PASSED = 60
+
+@dataclass(frozen=True)
+class Suite:
+    """A library's tests of an algorithm, run with a drop-in in its place (``SB3_OFFON_SWAP`` of the plugin)."""
+
+    distribution: str  # on PyPI
+    version: str  # the installed one's
+    test_files: dict[str, tuple[str, ...]]
+    swap: str
+    # The run must have passed at least this many tests, so that it cannot pass by collecting nothing
+    min_passed: int
+
+
+SUITES = {
+    # SB3 2.9.2: 68 passed, 6 skipped (67 passed without ale_py)
+    "OffOnDQN": Suite("stable-baselines3", stable_baselines3.__version__, SB3_TEST_FILES, "OffOnDQN", 60),
+    # sb3-contrib 2.9.2: 32 passed, 1 skipped, for each drop-in
+    "OffOnQRDQN": Suite("sb3-contrib", sb3_contrib.__version__, CONTRIB_TEST_FILES, "OffOnQRDQN", 28),
+    "QRDQN": Suite("sb3-contrib", sb3_contrib.__version__, CONTRIB_TEST_FILES, "QRDQN", 28),
+}
 
 SUBPROCESS_TIMEOUT_S = 1800
 
@@ -60,14 +94,15 @@ def cache_root() -> Path:
     return Path(os.environ.get("SB3_OFFON_CACHE", Path.home() / ".cache" / "sb3-offon"))
 
 
-def fetch_sb3_tests(version: str = stable_baselines3.__version__) -> Path:
+def fetch_tests(distribution: str, version: str) -> Path:
     """
-    The folder holding SB3 ``version``'s ``tests/`` and ``pyproject.toml`` (its pytest configuration), downloaded from
-    PyPI once and cached.
+    The folder holding the ``tests/`` and ``pyproject.toml`` (its pytest configuration) of ``distribution`` ``version``
+    (``stable-baselines3``, ``sb3-contrib``), downloaded from PyPI once and cached.
 
     :raises RuntimeError: where the sdist cannot be downloaded or has no tests
     """
-    target = cache_root() / f"stable_baselines3-{version}"
+    sdist_name = distribution.replace("-", "_")
+    target = cache_root() / f"{sdist_name}-{version}"
     if (target / "tests").is_dir() and (target / "pyproject.toml").is_file():
         return target
     target.parent.mkdir(parents=True, exist_ok=True)
@@ -76,16 +111,16 @@ def fetch_sb3_tests(version: str = stable_baselines3.__version__) -> Path:
             [
                 sys.executable,
                 *("-m", "pip", "download", "--no-binary", ":all:", "--no-deps", "--disable-pip-version-check"),
-                *(f"stable-baselines3=={version}", "-d", tmp),
+                *(f"{distribution}=={version}", "-d", tmp),
             ],
             capture_output=True,
             text=True,
             timeout=600,
         )
-        sdists = list(Path(tmp).glob("stable_baselines3-*.tar.gz"))
+        sdists = list(Path(tmp).glob(f"{sdist_name}-*.tar.gz"))
         if download.returncode != 0 or len(sdists) != 1:
             raise RuntimeError(
-                f"could not download the sdist of stable-baselines3=={version} (exit {download.returncode}):\n"
+                f"could not download the sdist of {distribution}=={version} (exit {download.returncode}):\n"
                 f"{download.stdout[-3000:]}\n{download.stderr[-3000:]}"
             )
         extracted = Path(tmp) / "extracted"
@@ -117,11 +152,11 @@ def missing_modules(modules: tuple[str, ...]) -> list[str]:
     return [module for module in modules if importlib.util.find_spec(module) is None]
 
 
-def sb3_pytest_command(sb3_dir: Path, extra_args: list[str] = ()) -> tuple[list[str], list[str]]:
-    """The pytest command line over SB3's DQN test files, and the files left out (with the modules they miss)."""
+def suite_pytest_command(suite: Suite, tests_dir: Path, extra_args: list[str] = ()) -> tuple[list[str], list[str]]:
+    """The pytest command line over the suite's test files, and the files left out (with the modules they miss)."""
     files, left_out = [], []
-    for name, modules in SB3_TEST_FILES.items():
-        path = sb3_dir / "tests" / name
+    for name, modules in suite.test_files.items():
+        path = tests_dir / "tests" / name
         missing = missing_modules(modules)
         if missing:
             left_out.append(f"{name} (needs {', '.join(missing)})")
@@ -131,21 +166,22 @@ def sb3_pytest_command(sb3_dir: Path, extra_args: list[str] = ()) -> tuple[list[
             left_out.append(f"{name} (not in this version's tests)")
     command = [
         sys.executable,
-        *("-m", "pytest", "-c", str(sb3_dir / "pyproject.toml"), "--rootdir", str(sb3_dir)),
-        *("-p", "sb3_offon_plugin", "--offon-dqn-only", "-p", "no:cacheprovider", "-q", "-rfEs"),
+        *("-m", "pytest", "-c", str(tests_dir / "pyproject.toml"), "--rootdir", str(tests_dir)),
+        *("-p", "sb3_offon_plugin", "--swapped-only", "-p", "no:cacheprovider", "-q", "-rfEs"),
         *extra_args,
         *files,
     ]
     return command, left_out
 
 
-def sb3_subprocess_env() -> dict[str, str]:
+def suite_subprocess_env(suite: Suite) -> dict[str, str]:
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(PLUGIN_DIR), env.get("PYTHONPATH")]))
-    # Our own pytest options (say -W error or --strict-markers through PYTEST_ADDOPTS) are not SB3's
+    env["SB3_OFFON_SWAP"] = suite.swap
+    # Our own pytest options (say -W error or --strict-markers through PYTEST_ADDOPTS) are not the library's
     env.pop("PYTEST_ADDOPTS", None)
-    # One torch/BLAS thread: SB3's tests use small networks, and on a busy 2-core machine the default threads fight
-    # over the cores (measured: test_her.py::test_performance_her 208 s with the default, 8 s with one thread)
+    # One torch/BLAS thread: the tests use small networks, and on a busy 2-core machine the default threads fight
+    # over the cores (measured: SB3's test_her.py::test_performance_her 208 s with the default, 8 s with one thread)
     for variable in ("OMP_NUM_THREADS", "MKL_NUM_THREADS"):
         env.setdefault(variable, "1")
     return env
@@ -153,39 +189,43 @@ def sb3_subprocess_env() -> dict[str, str]:
 
 @pytest.mark.slow
 @pytest.mark.sb3_suite
-def test_sb3_dqn_tests_pass_with_offon_dqn(tmp_path):
+@pytest.mark.parametrize("drop_in", list(SUITES))
+def test_the_libraries_tests_pass_with_the_drop_in(drop_in: str, tmp_path: Path) -> None:
     if os.environ.get("SB3_OFFON_SKIP_SB3_SUITE") == "1":
         pytest.skip("SB3_OFFON_SKIP_SB3_SUITE=1")
+    suite = SUITES[drop_in]
     # No skip on a failed download: the suite is a requirement, set SB3_OFFON_SKIP_SB3_SUITE=1 to go without it
-    sb3_dir = fetch_sb3_tests()
+    tests_dir = fetch_tests(suite.distribution, suite.version)
 
     report = tmp_path / "report.xml"
-    command, left_out = sb3_pytest_command(sb3_dir, [f"--junitxml={report}"])
+    command, left_out = suite_pytest_command(suite, tests_dir, [f"--junitxml={report}"])
     if left_out:
-        print(f"SB3 test files left out: {'; '.join(left_out)}")
+        print(f"{suite.distribution} test files left out: {'; '.join(left_out)}")
     result = subprocess.run(
         command,
-        cwd=tmp_path,  # some SB3 tests write to the working directory
-        env=sb3_subprocess_env(),
+        cwd=tmp_path,  # some of the tests write to the working directory
+        env=suite_subprocess_env(suite),
         capture_output=True,
         text=True,
         timeout=SUBPROCESS_TIMEOUT_S,
     )
     output = f"$ {' '.join(command)}\n{result.stdout[-20000:]}\n{result.stderr[-5000:]}"
     exit_code = result.returncode
-    assert exit_code == 0, f"SB3's DQN tests failed with OffOnDQN (exit {exit_code}):\n{output}"
+    assert exit_code == 0, f"{suite.distribution}'s tests failed with {drop_in} (exit {exit_code}):\n{output}"
 
-    suite = ET.parse(report).getroot()
-    suite = suite if suite.tag == "testsuite" else suite.find("testsuite")
-    counts = {key: int(suite.get(key, 0)) for key in ("tests", "failures", "errors", "skipped")}
+    junit = ET.parse(report).getroot()
+    junit = junit if junit.tag == "testsuite" else junit.find("testsuite")
+    counts = {key: int(junit.get(key, 0)) for key in ("tests", "failures", "errors", "skipped")}
     passed = counts["tests"] - counts["failures"] - counts["errors"] - counts["skipped"]
-    print(f"SB3 {stable_baselines3.__version__} tests with OffOnDQN: {passed} passed, {counts}")
+    print(f"{suite.distribution} {suite.version} tests with {drop_in}: {passed} passed, {counts}")
     assert counts["failures"] == counts["errors"] == 0, output
-    assert passed >= MIN_PASSED, f"only {passed} SB3 tests passed, expected at least {MIN_PASSED}:\n{output}"
+    assert passed >= suite.min_passed, f"only {passed} tests passed, expected at least {suite.min_passed}:\n{output}"
 
 
 if __name__ == "__main__":
-    sb3_command, sb3_left_out = sb3_pytest_command(fetch_sb3_tests(), sys.argv[1:])
-    if sb3_left_out:
-        print(f"SB3 test files left out: {'; '.join(sb3_left_out)}", file=sys.stderr)
-    sys.exit(subprocess.run(sb3_command, env=sb3_subprocess_env()).returncode)
+    chosen = SUITES[sys.argv[1]] if len(sys.argv) > 1 and sys.argv[1] in SUITES else SUITES["OffOnDQN"]
+    pytest_args = sys.argv[2:] if len(sys.argv) > 1 and sys.argv[1] in SUITES else sys.argv[1:]
+    suite_command, suite_left_out = suite_pytest_command(chosen, fetch_tests(chosen.distribution, chosen.version), pytest_args)
+    if suite_left_out:
+        print(f"{chosen.distribution} test files left out: {'; '.join(suite_left_out)}", file=sys.stderr)
+    sys.exit(subprocess.run(suite_command, env=suite_subprocess_env(chosen)).returncode)

@@ -1,74 +1,98 @@
 """
-Pytest plugin that runs Stable-Baselines3's own test suite with ``OffOnDQN`` in place of ``DQN``.
+Pytest plugin that runs a library's own tests of an algorithm with this package's drop-in in its place: SB3's tests of
+``DQN`` with ``OffOnDQN``, sb3-contrib's tests of ``QRDQN`` with ``OffOnQRDQN`` or with ``sb3_offon.qrdqn.QRDQN``.
 
-Load it with ``-p sb3_offon_plugin`` (this folder on ``PYTHONPATH``) when running SB3's test files; it is not a
-``conftest.py`` on purpose, so that this project's own test run never picks it up and never swaps SB3's ``DQN``.
-``tests/test_sb3_suite.py`` fetches SB3's tests (the sdist of the installed version) and runs them with it.
+Load it with ``-p sb3_offon_plugin`` (this folder on ``PYTHONPATH``) when running those test files; it is not a
+``conftest.py`` on purpose, so that this project's own test run never picks it up and never swaps a class.
+``tests/test_sb3_suite.py`` fetches the libraries' tests (the sdist of the installed version) and runs them with it.
 
 What it does:
 
-- Before any test module is imported (plugins load before collection), ``stable_baselines3.DQN`` and
-  ``stable_baselines3.dqn.DQN`` -- the only places SB3's tests import ``DQN`` from, as ``from stable_baselines3
-  import DQN`` or ``sb3.DQN`` -- are set to ``sb3_offon.OffOnDQN``. ``stable_baselines3.dqn.dqn.DQN``, the defining
-  module, keeps SB3's class (``OffOnDQN`` subclasses it).
-- ``--offon-dqn-only`` keeps the tests that exercise DQN: a test parametrised with algorithm classes is kept for its
-  ``OffOnDQN`` cases only; a test with no algorithm parameter is kept if its source names ``DQN``. Every other test
-  is deselected. (A ``-k DQN`` filter would miss the tests that build a DQN without it being in their id, such as
-  ``test_callbacks.py::test_eval_success_logging``.)
-- Tests listed in ``DQN_RUN_NAME`` run with ``OffOnDQN.learn``'s default ``tb_log_name`` set to ``"DQN"``: they
-  read the tensorboard run folder by the name of ``DQN.learn``'s default (``DQN_1``), while ``OffOnDQN`` names its
-  runs after itself (``OffOnDQN_1``), as every SB3 and sb3-contrib algorithm does. What they check (the events in
-  that run) is then checked for ``OffOnDQN``. Keep this list short and exact; anything else that fails is a bug.
+- ``SB3_OFFON_SWAP`` (an environment variable: ``OffOnDQN``, the default, ``OffOnQRDQN`` or ``QRDQN``) names the class
+  swapped in. Before any test module is imported (plugins load before collection), the names the tests import the
+  original from -- ``stable_baselines3.DQN`` and ``stable_baselines3.dqn.DQN``; ``sb3_contrib.QRDQN`` and
+  ``sb3_contrib.qrdqn.QRDQN`` -- are set to it. The defining modules keep the originals (the drop-ins subclass them).
+- ``--swapped-only`` keeps the tests that exercise the original: a test parametrised with algorithm classes is kept
+  for its swapped-in cases only; a test with no algorithm parameter is kept if its source names the original. Every
+  other test is deselected. (A ``-k DQN`` filter would miss the tests that build a DQN without it being in their id,
+  such as SB3's ``test_callbacks.py::test_eval_success_logging``.)
+- Tests listed in ``RUN_NAME_TESTS`` run with the drop-in's ``learn`` default ``tb_log_name`` set to the original's
+  name: they read the tensorboard run folder by the name of the original's default (``DQN_1``), while a drop-in names
+  its runs after itself (``OffOnDQN_1``), as every SB3 and sb3-contrib algorithm does. What they check (the events in
+  that run) is then checked for the drop-in. Keep this list short and exact; anything else that fails is a bug.
 """
 
 import functools
 import inspect
+import os
 import re
 from collections.abc import Iterator
+from dataclasses import dataclass
 from typing import Any
 
 import pytest
+import sb3_contrib
+import sb3_contrib.qrdqn
 import stable_baselines3
 import stable_baselines3.dqn
+from sb3_contrib.qrdqn.qrdqn import QRDQN as CONTRIB_QRDQN
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.dqn.dqn import DQN as SB3_DQN
 
-from sb3_offon import OffOnDQN
-
-# Test node ids (relative to SB3's tests folder) that read the tensorboard run folder "DQN_1" by name
-DQN_RUN_NAME = {"test_callbacks.py::test_eval_callback_logs_are_written_with_the_correct_timestep"}
-
-_NAMES_DQN = re.compile(r"\bDQN\b")
+from sb3_offon import OffOnDQN, OffOnQRDQN
+from sb3_offon.qrdqn import QRDQN
 
 
-def swap_dqn() -> None:
-    """Make ``from stable_baselines3 import DQN`` (and ``stable_baselines3.dqn``) give ``OffOnDQN``."""
-    assert issubclass(OffOnDQN, SB3_DQN)
-    stable_baselines3.DQN = OffOnDQN  # type: ignore[misc]
-    stable_baselines3.dqn.DQN = OffOnDQN  # type: ignore[misc]
+@dataclass(frozen=True)
+class Swap:
+    """A drop-in put where a library's tests import an original class from."""
 
+    original: type[BaseAlgorithm]
+    drop_in: type[BaseAlgorithm]
+    modules: tuple[Any, ...]  # the modules whose attribute of the original's name becomes the drop-in
+    run_name_tests: frozenset[str] = frozenset()  # see the module's docstring
+
+    def apply(self) -> None:
+        assert issubclass(self.drop_in, self.original)
+        for module in self.modules:
+            setattr(module, self.original.__name__, self.drop_in)
+
+
+SWAPS = {
+    "OffOnDQN": Swap(
+        SB3_DQN,
+        OffOnDQN,
+        (stable_baselines3, stable_baselines3.dqn),
+        # Test node ids (relative to SB3's tests folder) that read the tensorboard run folder "DQN_1" by name
+        frozenset({"test_callbacks.py::test_eval_callback_logs_are_written_with_the_correct_timestep"}),
+    ),
+    "OffOnQRDQN": Swap(CONTRIB_QRDQN, OffOnQRDQN, (sb3_contrib, sb3_contrib.qrdqn)),
+    "QRDQN": Swap(CONTRIB_QRDQN, QRDQN, (sb3_contrib, sb3_contrib.qrdqn)),
+}
+SWAP = SWAPS[os.environ.get("SB3_OFFON_SWAP", "OffOnDQN")]
+_NAMES_ORIGINAL = re.compile(rf"\b{SWAP.original.__name__}\b")
 
 # At import: ``-p`` loads this module before the test modules are collected (and so imported)
-swap_dqn()
+SWAP.apply()
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
     group = parser.getgroup("sb3_offon")
     group.addoption(
-        "--offon-dqn-only",
+        "--swapped-only",
         action="store_true",
         default=False,
-        help="keep only the tests that exercise DQN (now OffOnDQN)",
+        help=f"keep only the tests that exercise {SWAP.original.__name__} (now {SWAP.drop_in.__name__})",
     )
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    swap_dqn()  # in case something re-imported stable_baselines3 in between
-    config.addinivalue_line("markers", "sb3_offon: test of SB3's suite run with OffOnDQN in place of DQN")
+    SWAP.apply()  # in case something re-imported the library in between
+    config.addinivalue_line("markers", f"sb3_offon: test run with {SWAP.drop_in.__name__} in place of the original")
 
 
 def pytest_report_header(config: pytest.Config) -> str:
-    return f"sb3_offon plugin: stable_baselines3.DQN is {stable_baselines3.DQN.__module__}.{stable_baselines3.DQN.__name__}"
+    return f"sb3_offon plugin: {SWAP.original.__name__} is {SWAP.drop_in.__module__}.{SWAP.drop_in.__name__}"
 
 
 def _algorithm_classes(value: Any) -> list[type]:
@@ -82,7 +106,7 @@ def _algorithm_classes(value: Any) -> list[type]:
     return []
 
 
-def _source_names_dqn(item: pytest.Item) -> bool:
+def _source_names_original(item: pytest.Item) -> bool:
     function = getattr(item, "function", None)
     if function is None:
         return False
@@ -90,16 +114,23 @@ def _source_names_dqn(item: pytest.Item) -> bool:
         source = inspect.getsource(function)
     except (OSError, TypeError):
         return False
-    return bool(_NAMES_DQN.search(source))
+    return bool(_NAMES_ORIGINAL.search(source))
 
 
-def exercises_dqn(item: pytest.Item) -> bool:
+def _parametrised_with_classes(item: pytest.Item) -> bool:
+    """Whether one of the test's parametrisations lists algorithm classes (a case may hold another value there)."""
+    return any(_algorithm_classes(list(mark.args[1])) for mark in item.iter_markers("parametrize") if len(mark.args) > 1)
+
+
+def exercises_original(item: pytest.Item) -> bool:
     callspec = getattr(item, "callspec", None)
     params = callspec.params if callspec is not None else {}
     classes = [cls for value in params.values() for cls in _algorithm_classes(value)]
     if classes:
-        return any(issubclass(cls, SB3_DQN) for cls in classes)
-    return _source_names_dqn(item)
+        return any(issubclass(cls, SWAP.original) for cls in classes)
+    if _parametrised_with_classes(item):
+        return False  # a case of another kind in a list of algorithms (sb3-contrib's "ars_multi")
+    return _source_names_original(item)
 
 
 def _relative_nodeid(item: pytest.Item) -> str:
@@ -109,11 +140,11 @@ def _relative_nodeid(item: pytest.Item) -> str:
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    if not config.getoption("offon_dqn_only"):
+    if not config.getoption("swapped_only"):
         return
     selected, deselected = [], []
     for item in items:
-        if exercises_dqn(item):
+        if exercises_original(item):
             item.add_marker(pytest.mark.sb3_offon)
             selected.append(item)
         else:
@@ -125,9 +156,10 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
 
 @pytest.hookimpl(wrapper=True)
 def pytest_runtest_call(item: pytest.Item) -> Iterator[None]:
-    if _relative_nodeid(item).split("[", 1)[0] not in DQN_RUN_NAME:
+    if _relative_nodeid(item).split("[", 1)[0] not in SWAP.run_name_tests:
         return (yield)
     # partialmethod: an explicit tb_log_name of the test still wins
     with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(OffOnDQN, "learn", functools.partialmethod(OffOnDQN.learn, tb_log_name="DQN"))
+        learn = SWAP.drop_in.learn
+        patch.setattr(SWAP.drop_in, "learn", functools.partialmethod(learn, tb_log_name=SWAP.original.__name__))
         return (yield)
