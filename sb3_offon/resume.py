@@ -36,7 +36,8 @@ import os
 import shutil
 import warnings
 import zipfile
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -99,6 +100,19 @@ def checkpoint_folders(folder: str | Path) -> list[Path]:
     if not folder.is_dir():
         return []
     return sorted((path for path in folder.iterdir() if path.is_dir() and path.name.isdigit()), key=lambda p: -int(p.name))
+
+
+@contextmanager
+def n_step_reload_unflagged() -> Iterator[None]:
+    """
+    Loading a model inside this block, SB3's warning that its ``n_steps`` is ignored is not shown: a model that SB3 gave
+    an n-step buffer (``n_steps`` > 1 and no buffer class) was saved with that class and its n in
+    ``replay_buffer_kwargs``, which build the same buffer again (and a checkpoint's buffer replaces it), so nothing is
+    ignored; SB3 warns because the class is now given.
+    """
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=r"`n_steps=\d+` is ignored because a custom `replay_buffer_class`")
+        yield
 
 
 def resumed_seed(seed: int | None, num_timesteps: int) -> int:
@@ -369,7 +383,8 @@ class Checkpoint:
         :return: the model, its replay buffer loaded
         """
         self.check_algorithm(algo_class)
-        model = algo_class.load(self.model_path, env=env, **kwargs)
+        with n_step_reload_unflagged():
+            model = algo_class.load(self.model_path, env=env, **kwargs)
         buffer = self.folder / REPLAY_BUFFER_FILE
         if buffer.is_file():
             # truncate_last_traj: OffOnDQN's buffers close their running episodes' returns as truncations

@@ -17,6 +17,7 @@ Its experiment manager (:class:`OffOnExperimentManager`) also writes checkpoints
 (``--checkpoint-freq``, ``--resume``).
 """
 
+import contextlib
 import difflib
 import inspect
 import json
@@ -48,7 +49,15 @@ from sb3_offon.offon_dqn import OffOnDQN
 from sb3_offon.offon_dqn.offon_dqn import LOSS_FUNCTIONS, MC_MIXING_OPTIONS, SARSA_TARGET_OPTIONS
 from sb3_offon.offon_qrdqn import OffOnQRDQN
 from sb3_offon.qrdqn import QRDQN
-from sb3_offon.resume import STOPPED_FILE, Checkpoint, CheckpointError, RunCheckpoint, checkpoint_folders, joined_monitor
+from sb3_offon.resume import (
+    STOPPED_FILE,
+    Checkpoint,
+    CheckpointError,
+    RunCheckpoint,
+    checkpoint_folders,
+    joined_monitor,
+    n_step_reload_unflagged,
+)
 from sb3_offon.torch_layers import MinAtarCNN
 from sb3_offon.variants import DQNMC, DQNSarsa
 
@@ -245,7 +254,8 @@ class OffOnExperimentManager(ExperimentManager):
             self.continue_training = True
         run_folder_existed = Path(self.save_path).exists()
         try:
-            results = super().setup_experiment()
+            with n_step_reload_unflagged() if self.resumed_from is not None else contextlib.nullcontext():
+                results = super().setup_experiment()
         except BaseException as error:
             if not run_folder_existed:
                 shutil.rmtree(self.save_path, ignore_errors=True)
