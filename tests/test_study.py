@@ -220,7 +220,7 @@ def test_interval_estimates_do_not_depend_on_the_other_algorithms() -> None:
 
 
 # The committed studies: the reporter writes each committed table.md (and verdict.md) again from the committed runs
-COMMITTED = ["paper", "tuned", "headtohead", "headtohead2", "minatar"]
+COMMITTED = ["paper", "tuned", "headtohead", "headtohead2", "minatar", "classic_qr"]
 
 
 @pytest.mark.slow
