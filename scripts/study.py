@@ -107,6 +107,19 @@ class Interim:
         envs = ", ".join(self.envs) if self.envs else ""
         return f"{seeds} on {envs}" if seeds and envs else seeds or envs
 
+    def note(self, study_command: str) -> str:
+        """The sentence that marks a report as this look, with what its figures lack; ``study_command``: the study's own."""
+        narrowed = " and ".join(name for name, values in (("seeds", self.seeds), ("envs", self.envs)) if values)
+        caveats = []
+        if self.seeds:
+            caveats.append("Bootstrap intervals over a few seeds are too narrow: they resample only the seeds there are.")
+        if self.envs:
+            caveats.append("Aggregates over some of the envs are not the study's.")
+        return (
+            f"An interim look at {self.words()} only, not the study's verdict, which is on all its {narrowed} "
+            f"(`{study_command}`). {' '.join(caveats)}"
+        )
+
     def folder(self) -> str:
         """Its report's folder name: ``seeds_1_2``, ``envs_CartPole-v1_Acrobot-v1``, or both joined by ``_``."""
         parts = [f"seeds_{'_'.join(map(str, self.seeds))}"] if self.seeds else []
@@ -185,24 +198,7 @@ def report(study: Study, root: Path, out: Path, interim: Interim | None = None) 
         return selection.report(study, runs, scores, out, command(study))
     out.mkdir(parents=True, exist_ok=True)
     decision, lines = verdict(study, runs, scores)
-    caveats = [
-        *(
-            ["Bootstrap intervals over a few seeds are too narrow: they resample only the seeds there are."]
-            if interim and interim.seeds
-            else []
-        ),
-        *(["Aggregates over some of the envs are not the study's."] if interim and interim.envs else []),
-    ]
-    interim_note = (
-        [
-            f"An interim look at {interim.words()} only, not the study's verdict, which is on all its "
-            f"{' and '.join(name for name, narrowed in (('seeds', interim.seeds), ('envs', interim.envs)) if narrowed)} "
-            f"(`{command(study)}`). {' '.join(caveats)}",
-            "",
-        ]
-        if interim
-        else []
-    )
+    interim_note = [interim.note(command(study)), ""] if interim else []
     if study.tables == "benchmark":
         options = argparse.Namespace(
             root=root,
