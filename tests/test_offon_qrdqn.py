@@ -107,6 +107,12 @@ def test_bad_input_names_the_parameter(name, value, message):
         OffOnQRDQN("MlpPolicy", "CartPole-v1", **{name: value})
 
 
+@pytest.mark.parametrize("dueling", [True, False])
+def test_a_dueling_network_is_refused_by_name(dueling):
+    with pytest.raises(ValueError, match=r"policy_kwargs\['dueling'\]"):
+        OffOnQRDQN("MlpPolicy", "CartPole-v1", policy_kwargs=dict(dueling=dueling))
+
+
 def test_a_plain_buffer_is_refused():
     with pytest.raises(ValueError, match="replay_buffer_class"):
         OffOnQRDQN("MlpPolicy", "CartPole-v1", replay_buffer_class=ReplayBuffer)

@@ -68,11 +68,12 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
     before its runs, found the two level (mean normalised AUC 0.928 against 0.924 over CartPole-v1 and Acrobot-v1,
     seeds 0-1) and kept the sampled form (``results/qr_lambda_form/README.md``); the projected form stays as an option.
 
-    What OffOnQRDQN does not have: OffOnDQN's coin-flip modes (``mc_mixing`` other than ``"lambda"``) and the squared
-    error (``loss="mse"``), each a ``ValueError``; ``sarsa_target`` is accepted and plays no part, as in OffOnDQN's
-    lambda mode. The buffer is an Off-On buffer (its episode bookkeeping and recorded next actions are what the trace
-    needs); another ``replay_buffer_class`` is a ``ValueError``. Unlike OffOnDQN's, its Monte-Carlo returns are not
-    bootstrapped when an episode is cut (the lambda-returns never read them): ``mc_truncation`` acts at the refresh.
+    What OffOnQRDQN does not have: OffOnDQN's coin-flip modes (``mc_mixing`` other than ``"lambda"``), the squared error
+    (``loss="mse"``) and dueling networks (``policy_kwargs=dict(dueling=True)``), each a ``ValueError``;
+    ``sarsa_target`` is accepted and plays no part, as in OffOnDQN's lambda mode. The buffer is an Off-On buffer (its
+    episode bookkeeping and recorded next actions are what the trace needs); another ``replay_buffer_class`` is a
+    ``ValueError``. Unlike OffOnDQN's, its Monte-Carlo returns are not bootstrapped when an episode is cut (the
+    lambda-returns never read them): ``mc_truncation`` acts at the refresh.
 
     :param policy: The policy model to use (MlpPolicy, CnnPolicy, ...)
     :param env: The environment to learn from (if registered in Gym, can be str)
@@ -251,6 +252,12 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
                 raise ValueError(f"{error}{f' ({what})' if what else ''}") from None
         if not isinstance(self.sarsa_target, str):
             raise ValueError(f"`sarsa_target` must be a string, got {self.sarsa_target!r}")
+        if "dueling" in (self.policy_kwargs or {}):
+            # QR-DQN's policy would fail on it with a TypeError that does not say what to do
+            raise ValueError(
+                "`policy_kwargs['dueling']`: dueling networks are OffOnDQN's only; OffOnQRDQN's quantile network is "
+                "QR-DQN's (remove the key)"
+            )
 
     def _setup_model(self) -> None:
         self._check_offon_arguments()
