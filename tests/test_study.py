@@ -380,3 +380,11 @@ def test_the_benchmark_tables_name_algorithms_as_the_study_does(tmp_path: Path) 
     assert "| The candidate |" in table and "search's choice" not in table
     assert "for The candidate:" in (tmp_path / "report" / "verdict.md").read_text()
     assert study_module.plot.label("offon_lambda_choice") == "Off-On λ (search's choice)"  # the usual names back after it
+
+
+def test_the_benchmarks_page_names_every_study_file() -> None:
+    root = Path(__file__).resolve().parents[1]
+    page = (root / "docs" / "benchmarks.md").read_text(encoding="utf-8")
+    studies = sorted(path.stem for path in (root / "benchmarks").glob("*.yml"))
+    assert studies, "the study files are in benchmarks/"
+    assert [study for study in studies if f"`{study}`" not in page] == []
