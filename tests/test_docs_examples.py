@@ -1,8 +1,8 @@
 """
 The Python examples of the README and of the documentation run as printed: each page's ```python blocks are executed in
 order in one namespace (as a reader pastes them, a later block using an earlier one's imports), in a fresh folder, with
-training cut to a few hundred steps so that the whole file takes seconds. A renamed argument, a
-moved import or a removed class fails here before a user meets it.
+training cut to a few hundred steps so that the whole file takes seconds. A renamed argument, a moved import or a
+removed class fails here before a user meets it.
 """
 
 import re
