@@ -223,6 +223,13 @@ def test_the_lambda_cache_priorities_follow_the_errors():
     expected = np.power(np.array([2.0, 3.0, 0.0]) + buffer.epsilon, buffer.alpha)
     np.testing.assert_allclose(cache.tree.values(entries), expected)
     np.testing.assert_allclose(buffer.tree.values(buffer.leaves(cache.slots[entries], cache.envs[entries])), expected)
+    # The errors of a training call are float32 (read back from the loss): both trees hold the same p^alpha, bit for bit
+    entries = np.array([3, 4, 5, 3])  # drawn with replacement: an entry trained twice keeps its last error, in both trees
+    model._update_lambda_priorities(cache, entries, np.array([0.1, -1.7, 2.3, 0.3], dtype=np.float32))
+    np.testing.assert_array_equal(
+        cache.tree.values(entries), buffer.tree.values(buffer.leaves(cache.slots[entries], cache.envs[entries]))
+    )
+    np.testing.assert_array_equal(cache.tree.values([3]), np.power(np.float64(np.float32(0.3)) + buffer.epsilon, buffer.alpha))
 
 
 def test_offon_qrdqn_with_prioritised_replay(tmp_path):

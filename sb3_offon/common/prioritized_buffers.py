@@ -123,13 +123,15 @@ class PrioritizedBufferMixin(OffOnBufferMixin):
     def _leaf_value(self, priority: float | np.ndarray) -> Any:
         return np.power(priority, self.alpha)
 
-    def update_priorities(self, slots: np.ndarray, envs: np.ndarray, errors: np.ndarray) -> None:
+    def update_priorities(self, slots: np.ndarray, envs: np.ndarray, errors: np.ndarray) -> np.ndarray:
         """
         Set the priorities of the transitions (slot, env column) from their errors: p = |error| + epsilon.
 
         :param slots: the transitions' slots
         :param envs: their env columns
         :param errors: their errors (TD errors, or per-sample losses), one per transition
+        :return: the values set in the tree, p^alpha (float64), one per transition: what another tree over the same
+            transitions (the lambda-return cache's) sets, so that the two hold the same numbers
         """
         priorities = np.abs(np.asarray(errors, dtype=np.float64).reshape(-1)) + self.epsilon
         if not np.all(np.isfinite(priorities)):
@@ -141,7 +143,9 @@ class PrioritizedBufferMixin(OffOnBufferMixin):
         if len(leaves) != len(priorities) or (len(leaves) and (leaves.min() < 0 or leaves.max() >= len(self._tree))):
             raise ValueError("prioritised replay: one error per stored transition (slot < buffer_size, env < n_envs)")
         self.max_priority = max(self.max_priority, float(priorities.max(initial=0.0)))
-        self._pending.append((leaves, self._leaf_value(priorities)))
+        values = self._leaf_value(priorities)
+        self._pending.append((leaves, values))
+        return values
 
     def n_transitions(self) -> int:
         """How many transitions are stored (all env columns)."""

@@ -133,10 +133,9 @@ class LambdaRefreshMixin:
         """New priorities |error| + epsilon for the trained entries: in the buffer's tree and the cache's."""
         buffer = self.replay_buffer
         assert isinstance(buffer, PrioritizedBufferMixin) and cache.tree is not None
-        buffer.update_priorities(cache.slots[entries], cache.envs[entries], errors)
+        values = buffer.update_priorities(cache.slots[entries], cache.envs[entries], errors)
         live = buffer.holds_transition(cache.added_at[entries])  # overwritten during the call: stays at 0
-        priorities = np.abs(errors.reshape(-1)) + buffer.epsilon
-        cache.tree.update(entries[live], np.power(priorities[live], buffer.alpha), check=False)
+        cache.tree.update(entries[live], values[live], check=False)
 
     def _train_on_lambda_cache(self, gradient_steps: int, batch_size: int) -> None:
         """
