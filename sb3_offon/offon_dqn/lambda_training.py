@@ -154,7 +154,8 @@ class LambdaRefreshMixin:
             cache, entries, weights = self._draw_prioritized_lambda_entries(gradient_steps * batch_size)
         else:
             cache, entries = self._draw_lambda_entries(gradient_steps * batch_size)
-        parameters = self._parameter_list()
+        # Listed once per call, and only when clipped (QR-DQN's default clips nothing)
+        parameters = self._parameter_list() if self.max_grad_norm is not None else []
         losses, errors = [], []
         steps_per_chunk = self._steps_per_chunk(batch_size)
         for first_step in range(0, gradient_steps, steps_per_chunk):
