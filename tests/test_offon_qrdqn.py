@@ -224,3 +224,24 @@ def test_same_seed_same_result():
 
     for ours, theirs in zip(parameters(), parameters(), strict=True):
         assert th.equal(ours, theirs)
+
+
+@pytest.mark.parametrize("max_grad_norm", [None, 0.5])
+def test_gradients_are_clipped_only_with_max_grad_norm(monkeypatch, max_grad_norm):
+    # QR-DQN's default clips nothing; with max_grad_norm, every gradient step clips all of the policy's parameters
+    model = OffOnQRDQN("MlpPolicy", "CartPole-v1", seed=0, max_grad_norm=max_grad_norm, **SMALL)
+    model.learn(100)
+    calls = []
+    clip = th.nn.utils.clip_grad_norm_
+
+    def counting_clip(parameters, norm):
+        calls.append((list(parameters), norm))
+        return clip(parameters, norm)
+
+    monkeypatch.setattr(th.nn.utils, "clip_grad_norm_", counting_clip)
+    model.train(gradient_steps=5, batch_size=16)
+    if max_grad_norm is None:
+        assert calls == []
+    else:
+        assert len(calls) == 5
+        assert all(norm == 0.5 and len(params) == len(list(model.policy.parameters())) for params, norm in calls)
