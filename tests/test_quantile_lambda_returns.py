@@ -7,6 +7,7 @@ import pytest
 from gymnasium import spaces
 
 from sb3_offon import OffOnNStepReplayBuffer, OffOnReplayBuffer
+from sb3_offon.offon_dqn import lambda_returns
 from sb3_offon.offon_dqn.lambda_returns import compute_lambda_returns
 from sb3_offon.offon_qrdqn.quantile_lambda_returns import compute_quantile_lambda_returns, project_mixture
 
@@ -311,3 +312,118 @@ def test_project_mixture_is_the_quantile_function_of_the_mixture():
         law = [(x, weights[row] / 4) for x in first[row]] + [(x, (1 - weights[row]) / 4) for x in second[row]]
         expected = [quantile_function(law, (2 * i + 1) / 8) for i in range(4)]
         np.testing.assert_allclose(result[row], expected)
+
+
+# --- every sampled target against a log of the steps as they were taken ------------------------------------------------
+
+
+def logged_random_steps(buffer, n_adds, seed, cut_at=None):
+    """
+    ``n_adds`` random steps per env (terminations and truncations at random, ``end_open_episodes`` before step
+    ``cut_at``), each also written to a log of its own, per env and in the order taken: the reference below reads the
+    log, never the buffer.
+    """
+    rng = np.random.default_rng(seed)
+    log = [[] for _ in range(buffer.n_envs)]
+    for index in range(n_adds):
+        if index == cut_at:
+            buffer.end_open_episodes()
+            for env_log in log:
+                if env_log and not env_log[-1]["ended"]:
+                    env_log[-1]["ended"] = True
+        rewards = rng.integers(-5, 6, buffer.n_envs) + rng.random(buffer.n_envs)
+        actions = rng.integers(0, N_ACTIONS, buffer.n_envs)
+        draws = rng.random(buffer.n_envs)
+        terminated, truncated = draws < 0.12, (draws >= 0.12) & (draws < 0.22)
+        next_ids = 100 + index * buffer.n_envs + np.arange(buffer.n_envs)
+        step(buffer, rewards, actions, next_ids, dones=terminated | truncated, truncated=truncated)
+        for env, env_log in enumerate(log):
+            ended = bool(terminated[env] or truncated[env])
+            reward, action, next_id = float(np.float32(rewards[env])), int(actions[env]), float(next_ids[env])
+            env_log.append(dict(reward=reward, action=action, next_id=next_id, terminated=bool(terminated[env]), ended=ended))
+    return log
+
+
+def logged_horizons(env_log, start, block_end, n_steps, lam, qlearning_prob, cut_is_terminal):
+    """
+    Every horizon of the lambda-return of the transition taken at ``start`` (an index into ``env_log``), as (k-step
+    law's N atoms, weight), from the log: windows of up to ``n_steps`` steps that stop at an episode's end or at the
+    newest step; the trace goes on past a full window whose next window starts within the block (``block_end``, the
+    block's last index), with weight lam c (c = 1 after the greedy action, 1 - delta2 after another).
+    """
+    discounted, k, end = 0.0, 0, start
+    for end in range(start, start + n_steps):
+        discounted += GAMMA**k * env_log[end]["reward"]
+        k += 1
+        if env_log[end]["ended"] or end == len(env_log) - 1:
+            break
+    last = env_log[end]
+    bootstrap = last["next_id"] + OFFSETS
+    goes_on = k == n_steps and not last["ended"] and end + 1 < len(env_log) and start + n_steps <= block_end
+    if goes_on:
+        greedy = int(last["next_id"]) % N_ACTIONS
+        weight = lam * (1.0 if env_log[start + n_steps]["action"] == greedy else 1.0 - qlearning_prob)
+        following = logged_horizons(env_log, start + n_steps, block_end, n_steps, lam, qlearning_prob, cut_is_terminal)
+        after = [(bootstrap, 1.0 - weight)] + [(atoms, w * weight) for atoms, w in following]
+    elif last["terminated"] or (cut_is_terminal and last["ended"]):
+        after = [(np.zeros(N_ATOMS), 1.0)]
+    else:
+        after = [(bootstrap, 1.0)]
+    return [(discounted + GAMMA**k * atoms, w) for atoms, w in after if w > 0]
+
+
+@pytest.mark.parametrize(
+    "buffer_size, n_envs, n_steps, n_adds, lam, qlearning_prob, cut_is_terminal, n_wanted, block_size, cut_at",
+    [
+        (8, 1, 1, 21, 0.6, 0.5, False, 10**9, 100, None),  # wrapped twice, one env, whole buffer
+        (7, 3, 1, 25, 0.8, 1.0, True, 10**9, 100, 12),  # three envs, wrapped, a reset's cut, Watkins's cuts
+        (7, 3, 1, 25, 0.6, 0.5, False, 12, 3, None),  # small blocks: traces cut at the blocks' ends
+        (9, 2, 2, 30, 0.6, 0.5, False, 10**9, 100, 15),  # 2-step windows, wrapped, a reset's cut
+        (10, 3, 3, 33, 0.8, 0.0, True, 15, 4, None),  # 3-step windows in small blocks
+        (12, 2, 1, 9, 0.9, 0.0, False, 10**9, 100, 5),  # a buffer not yet full
+    ],
+)
+def test_every_sampled_target_is_one_horizon_of_the_logged_law(
+    monkeypatch, buffer_size, n_envs, n_steps, n_adds, lam, qlearning_prob, cut_is_terminal, n_wanted, block_size, cut_at
+):
+    chosen = []  # the blocks of each refresh: a trace stops at its block's end
+    choose_blocks = lambda_returns.choose_blocks
+
+    def recording_choose_blocks(*args):
+        chosen.append(choose_blocks(*args))
+        return chosen[-1]
+
+    monkeypatch.setattr(lambda_returns, "choose_blocks", recording_choose_blocks)
+    buffer = make_buffer(buffer_size, n_envs, n_steps)
+    log = logged_random_steps(buffer, n_adds, seed=n_adds, cut_at=cut_at)
+    # The blocks (choose_blocks draws from NumPy's global generator): at this seed, in the cases with small blocks, some
+    # short block ends where its last transition's trace could have gone on
+    np.random.seed(4)
+    settings = dict(n_wanted=n_wanted, block_size=block_size, gamma=GAMMA, lam=lam, qlearning_prob=qlearning_prob)
+    scalar = compute_lambda_returns(buffer, fake_values, cut_is_terminal=cut_is_terminal, key=0, **settings)
+    np.random.seed(4)
+    rng = np.random.default_rng(1)
+    cache = compute_quantile_lambda_returns(
+        buffer, fake_quantiles, cut_is_terminal=cut_is_terminal, key=0, rng=rng, **settings
+    )
+    np.testing.assert_array_equal(cache.added_at, scalar.added_at)
+    block_envs, block_starts, block_lengths = chosen[-1]
+    assert len(chosen) == 2 and all((a == b).all() for a, b in zip(chosen[0], chosen[1], strict=True))
+    first_added = buffer._n_adds - buffer.chronology()[1]  # the add index of chronological index 0
+    block_end = {}
+    for env, start, length in zip(block_envs, block_starts, block_lengths, strict=True):
+        for index in range(start, start + length):
+            block_end[(int(env), first_added + index)] = first_added + start + length - 1
+
+    horizons_drawn = set()
+    for env, added_at, atoms, scalar_return in zip(cache.envs, cache.added_at, cache.returns, scalar.returns, strict=True):
+        end = block_end[(int(env), int(added_at))]
+        law = logged_horizons(log[env], int(added_at), end, n_steps, lam, qlearning_prob, cut_is_terminal)
+        # The scalar lambda-return is the law's mean (the fake network's quantiles have the id as their mean)
+        assert sum(w * horizon.mean() for horizon, w in law) == pytest.approx(scalar_return, rel=1e-5, abs=1e-4)
+        matches = [i for i, (horizon, _) in enumerate(law) if np.allclose(atoms, horizon, rtol=1e-5, atol=1e-4)]
+        assert matches, (int(env), int(added_at), atoms, law)
+        horizons_drawn.add(matches[0])
+    if n_wanted >= n_envs * buffer_size:  # the whole buffer: every stored transition once
+        assert len(cache) == n_envs * buffer.chronology()[1]
+    assert len(horizons_drawn) > 1  # not only one-step targets: the traces went on

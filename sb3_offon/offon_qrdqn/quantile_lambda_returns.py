@@ -22,6 +22,10 @@ Two ways to turn that law into N atoms (``lambda_form``):
   step with probability lam c, stops otherwise) and the target is that horizon's k-step law, N atoms, with no
   projection. The quantile loss is an expectation over the target's atoms, linear in the target law, so its expected
   value over the draw is the loss against the mixture itself: an unbiased stochastic target. O(n) vectorised work.
+  The go-on-or-stop draw is made once per stored step and refresh, and every trace that reaches that step shares it:
+  each transition's horizon has the law above, but neighbours' are not independent (where the trace of t - 1 goes on
+  past t, its target is r_(t-1) + gamma times the target of t). Minibatches are drawn at random from the whole cache,
+  so few of their samples are neighbours.
 - ``"projected"``: the backward recursion above, each mixture of 2N weighted atoms projected back onto N atoms, the
   mixture's quantile function at tau_i = (2i - 1) / 2N (the W1 projection, as QR-DQN's own). Deterministic, but each
   step projects a projected law (its error compounds along the trace), and the recursion runs column by column over
