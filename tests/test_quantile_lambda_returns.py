@@ -329,7 +329,7 @@ def logged_random_steps(buffer, n_adds, seed, cut_at=None):
         if index == cut_at:
             buffer.end_open_episodes()
             for env_log in log:
-                if env_log and not env_log[-1]["ended"]:
+                if env_log:
                     env_log[-1]["ended"] = True
         rewards = rng.integers(-5, 6, buffer.n_envs) + rng.random(buffer.n_envs)
         actions = rng.integers(0, N_ACTIONS, buffer.n_envs)
