@@ -77,13 +77,24 @@ def per_env_table(study: Study, runs: dict, scores: dict, measure: str) -> list[
     return lines
 
 
-def difference_table(study: Study, scores: dict) -> list[str]:
-    others = [algo for algo in study.algos if algo != "dqn"]
-    lines = [f"| env | {' | '.join(f'{study.label(algo)} - DQN' for algo in others)} |", "|---|" + "---:|" * len(others)]
+def difference_references(study: Study) -> list[str]:
+    """
+    The algorithms the report subtracts every other's final return from: DQN, then each reference of a
+    ``final_not_below`` criterion of the rule (QR-DQN's, say), so that every algorithm of the study is also read against
+    the one the rule holds the candidate to, not the candidate alone.
+    """
+    references = ["dqn"] + [criterion["reference"] for criterion in study.rule if criterion["kind"] == "final_not_below"]
+    return [algo for algo in dict.fromkeys(references) if algo in study.algos]
+
+
+def difference_table(study: Study, scores: dict, reference: str = "dqn") -> list[str]:
+    others = [algo for algo in study.algos if algo != reference]
+    name = study.label(reference)
+    lines = [f"| env | {' | '.join(f'{study.label(algo)} - {name}' for algo in others)} |", "|---|" + "---:|" * len(others)]
     for env in study.envs:
         cells = []
         for algo in others:
-            difference = final_difference(study, scores, env, algo, "dqn")
+            difference = final_difference(study, scores, env, algo, reference)
             cells.append("-" if difference is None else interval(difference, "+.2f"))
         lines.append(f"| {env} | {' | '.join(cells)} |")
     return lines
@@ -227,7 +238,8 @@ def report(study: Study, root: Path, out: Path, interim: Interim | None = None) 
     ]
     text += ["", "## Final return (mean of the last evaluations)", "", *per_env_table(study, runs, scores, "final")]
     text += ["", "## AUC (mean evaluation return over training)", "", *per_env_table(study, runs, scores, "auc")]
-    text += ["", "## Final return minus DQN's", "", *difference_table(study, scores)]
+    for reference in difference_references(study):
+        text += ["", f"## Final return minus {study.label(reference)}'s", "", *difference_table(study, scores, reference)]
     for measure in ("auc", "final"):
         iqms = iqm_intervals(study, runs, scores, measure)
         title = "AUC" if measure == "auc" else "final return"

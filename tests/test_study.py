@@ -126,6 +126,32 @@ def test_the_verdict_waits_only_for_the_runs_its_rule_reads(tmp_path: Path) -> N
     assert decision == "incomplete (8 runs missing)"
 
 
+def test_every_algorithm_is_read_against_the_rules_reference(tmp_path: Path) -> None:
+    """A rule that holds the candidate to QR-DQN: the report subtracts QR-DQN's final return from every other's too."""
+    study_module = load_script("study")
+    path, root = write_study(tmp_path, {env: [3.0, 4.0, 5.0, 6.0] for env in ENVS})
+    for env in ENVS:
+        for seed in SEEDS:
+            write_run(root, "toy", "qrdqn", env, seed, [[7.0, 7.0]] * 3)  # 7 on every seed: means 2.5 (DQN), 4.5, 7
+    rule = [{"kind": "final_not_below", "reference": "qrdqn"}, {"kind": "iqm_above", "measure": "auc", "reference": "qrdqn"}]
+    path.write_text(yaml.safe_dump({**STUDY, "algos": [*STUDY["algos"], "qrdqn"], "rule": rule}))
+    study = study_module.Study.read(path)
+    assert study_module.difference_references(study) == ["dqn", "qrdqn"]
+    assert study_module.report(study, root, tmp_path / "report") == "does not hold"
+    table = (tmp_path / "report" / "table.md").read_text()
+    minus_qrdqn = table.split("## Final return minus QR-DQN's")[1].split("##")[0]
+    header = minus_qrdqn.strip().splitlines()[0]
+    assert header == f"| env | DQN - QR-DQN | {study.label('offon_lambda_choice')} - QR-DQN |"
+    # DQN 2.5 - 7 = -4.5 and the candidate 4.5 - 7 = -2.5 on both envs
+    for env in ENVS:
+        cells = next(line for line in minus_qrdqn.splitlines() if line.startswith(f"| {env} |")).split(" | ")
+        assert cells[1].startswith("-4.50 [") and cells[2].startswith("-2.50 [")
+    # The table against DQN stays as it was, QR-DQN in it at 7 - 2.5
+    minus_dqn = table.split("## Final return minus DQN's")[1].split("##")[0]
+    assert minus_dqn.strip().splitlines()[0] == f"| env | {study.label('offon_lambda_choice')} - DQN | QR-DQN - DQN |"
+    assert "| +4.50 [" in minus_dqn
+
+
 def test_setup_check_against_a_random_policy(tmp_path: Path) -> None:
     study_module = load_script("study")
     path, root = write_study(tmp_path, {env: [3.0, 4.0, 5.0, 6.0] for env in ENVS})
