@@ -9,7 +9,9 @@ lambda 0.9, Peng's Q(lambda)); ``paper``, the paper's coin flips (``PAPER_TARGET
 columns): SB3's DQN, SB3's DQN with ``n_steps=10`` (``dqn_nstep``), or OffOnDQN with its defaults (``offon_defaults``,
 to measure what an option of OffOnDQN costs). ``--candidate offon_qrdqn`` measures the QR-DQN family instead: OffOnQRDQN
 (``--mode defaults``, its constructor's; ``projected``, the projected recursion; ``double_q``) against
-``sb3_offon.qrdqn.QRDQN`` (``--baseline qrdqn``, its default then), both with QR-DQN's default 200 quantiles. Tables and
+``sb3_offon.qrdqn.QRDQN`` (``--baseline qrdqn``, its default then), both with QR-DQN's default 200 quantiles.
+``--baseline qrdqn_nstep`` is that QR-DQN with ``n_steps=3`` (MinAtar's n): against OffOnDQN, it measures what the
+quantile critic costs next to the defaults; against OffOnQRDQN, what lambda-returns cost next to n-step returns. Tables and
 JSON keep the roles' names ("DQN" the baseline, "OffOnDQN" the candidate) and say which classes they are.
 
 The two runs of a pair take turns in one process: each learn() runs in a thread of its own, and they hand a baton
@@ -33,6 +35,7 @@ Usage:
     python scripts/bench_speed.py --env LunarLander-v3 --mode double_q --baseline offon_defaults
     python scripts/bench_speed.py --env MinAtar/Breakout-v0 --candidate offon_qrdqn --prefill 10000 --flush-denormals
     python scripts/bench_speed.py --env LunarLander-v3 --mode per --baseline offon_defaults
+    python scripts/bench_speed.py --env MinAtar/Breakout-v0 --baseline qrdqn_nstep --prefill 10000 --flush-denormals
 
 ``--env AtariShaped`` is an Atari-shaped task made up on the spot (4 stacked 84x84 uint8 frames, episodes of 200 steps
 that end by termination, CnnPolicy, the zoo's Atari DQN settings with a smaller buffer), so that CNNs can be measured,
@@ -156,6 +159,7 @@ BASELINES: dict[str, tuple[type[DQN], dict]] = {
     "dqn_nstep": (DQN, dict(n_steps=10)),
     "offon_defaults": (OffOnDQN, {}),
     "qrdqn": (QRDQN, {}),
+    "qrdqn_nstep": (QRDQN, dict(n_steps=3)),  # n-step QR-DQN with MinAtar's n (hyperparams/qrdqn_nstep.yml)
     "offon_qrdqn_defaults": (OffOnQRDQN, {}),
 }
 ZOO_TIMESTEPS = {"CartPole-v1": 50_000, "LunarLander-v3": 100_000, ATARI_SHAPED: 10_000_000, MINATAR_BREAKOUT: 1_000_000}
@@ -231,8 +235,8 @@ def parse_args() -> argparse.Namespace:
         "--baseline",
         choices=sorted(BASELINES),
         default=None,
-        help="SB3's DQN, its n-step DQN (n = 10), OffOnDQN with its defaults, or QR-DQN (default: dqn for OffOnDQN, "
-        "qrdqn for OffOnQRDQN)",
+        help="SB3's DQN, its n-step DQN (n = 10), OffOnDQN with its defaults, QR-DQN, or n-step QR-DQN (n = 3) "
+        "(default: dqn for OffOnDQN, qrdqn for OffOnQRDQN)",
     )
     parser.add_argument(
         "--flush-denormals",

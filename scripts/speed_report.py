@@ -11,6 +11,7 @@ BASELINE_NAMES = {
     "dqn_nstep": "SB3's DQN with n_steps=10 (n-step DQN)",
     "offon_defaults": "OffOnDQN with its defaults",
     "qrdqn": "sb3_offon.qrdqn.QRDQN (QR-DQN)",
+    "qrdqn_nstep": "sb3_offon.qrdqn.QRDQN with n_steps=3 (n-step QR-DQN)",
     "offon_qrdqn_defaults": "OffOnQRDQN with its defaults",
 }
 

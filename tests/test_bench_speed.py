@@ -44,8 +44,13 @@ def parameters_digest(model) -> str:
             },
             {"DQN": QRDQN, "OffOnDQN": OffOnQRDQN},
         ),
+        # OffOnDQN's defaults against n-step QR-DQN (--baseline qrdqn_nstep): the baseline's n-step buffer in turns
+        (
+            {"DQN": {"n_steps": 3, "policy_kwargs": dict(net_arch=[16], n_quantiles=5)}},
+            {"DQN": QRDQN, "OffOnDQN": OffOnDQN},
+        ),
     ],
-    ids=["dqn-defaults", "nstep-coin-flips", "offon-double-q", "qrdqn-family"],
+    ids=["dqn-defaults", "nstep-coin-flips", "offon-double-q", "qrdqn-family", "nstep-qrdqn-baseline"],
 )
 def test_runs_taking_turns_learn_what_they_learn_alone(monkeypatch, extra_kwargs, classes):
     bench_speed = load_script("bench_speed")
@@ -102,6 +107,17 @@ def test_tables_say_which_baseline_the_dqn_columns_are(name):
     said = "The DQN columns and rows are the baseline's: SB3's DQN with n_steps=10 (n-step DQN)." in table.splitlines()
     assert said == (result.get("baseline", "dqn") == "dqn_nstep")
     assert table.splitlines()[4 if said else 2].startswith("| pair | order | DQN steps/s |")
+
+
+def test_every_baseline_is_named_in_the_tables():
+    """A baseline added to ``--baseline`` gets a name for its tables' "DQN" columns, and the name says its class."""
+    bench_speed = load_script("bench_speed")
+    speed_report = load_script("speed_report")
+    assert set(speed_report.BASELINE_NAMES) == set(bench_speed.BASELINES)
+    for baseline, (baseline_class, kwargs) in bench_speed.BASELINES.items():
+        name = speed_report.BASELINE_NAMES[baseline]
+        assert ("DQN" in name) if baseline_class.__name__ == "DQN" else (baseline_class.__name__ in name), baseline
+        assert all(f"{key}={value}" in name for key, value in kwargs.items()), baseline
 
 
 @pytest.mark.slow
