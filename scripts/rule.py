@@ -9,8 +9,8 @@ Each criterion of a study's ``rule`` is of one kind:
   reference's minus ``margin`` times the env's range (``ranges``: ``[low, high]`` per env);
 - ``iqm_above`` (``measure``: ``auc`` or ``final``; ``reference``): the candidate's IQM of normalised scores over every
   env and seed is above the reference's (point estimates; rliable's stratified bootstrap gives their intervals);
-- ``mean_above`` (``reference``, ``measure``): the candidate's mean over envs of its normalised mean score is above the
-  reference's;
+- ``mean_above`` (``reference``, ``measure``, optional ``margin``): the candidate's mean over envs of its normalised mean
+  score is above the reference's minus ``margin`` (default 0: above it);
 - ``auc_apart_above`` (``reference``, ``at_least``): on at least that many envs, the 95% interval of the candidate's
   mean AUC lies wholly above the reference's.
 
@@ -149,7 +149,8 @@ def judge_criterion(study: Study, runs: dict, scores: dict, criterion: dict, alg
     if kind == "final_within":
         return final_within(study, runs, scores, algo, reference, float(criterion["margin"]), envs)
     if kind == "mean_above":
-        return mean_above(study, runs, scores, algo, reference, criterion.get("measure", "auc"), envs)
+        margin = float(criterion.get("margin", 0.0))
+        return mean_above(study, runs, scores, algo, reference, criterion.get("measure", "auc"), envs, margin)
     if kind == "auc_apart_above":
         return auc_apart_above(study, runs, scores, algo, reference, int(criterion["at_least"]))
     raise ValueError(f"unknown criterion kind {kind!r} in the rule")
@@ -219,14 +220,16 @@ def final_within(
 
 
 def mean_above(
-    study: Study, runs: dict, scores: dict, algo: str, reference: str, measure: str, envs: list[str]
+    study: Study, runs: dict, scores: dict, algo: str, reference: str, measure: str, envs: list[str], margin: float = 0.0
 ) -> tuple[bool | None, str]:
-    """``algo``'s mean over ``envs`` of its normalised mean ``measure`` above the reference's."""
+    """``algo``'s mean over ``envs`` of its normalised mean ``measure`` above the reference's minus ``margin``."""
     text = f"mean normalised {measure.upper() if measure == 'auc' else measure} above {study.label(reference)}'s"
+    if margin:
+        text += f" minus {margin:g}"
     if not all(complete(study, runs, env, name) for env in envs for name in (algo, reference)):
         return None, f"{text}: runs missing"
     ours, theirs = (mean_normalised(study, scores, name, measure, envs) for name in (algo, reference))
-    return ours > theirs, f"{text}: {ours:.3f} against {theirs:.3f}"
+    return ours > theirs - margin, f"{text}: {ours:.3f} against {theirs:.3f}"
 
 
 def mean_normalised(study: Study, scores: dict, algo: str, measure: str, envs: list[str]) -> float:

@@ -206,6 +206,24 @@ def test_final_within_and_auc_apart_above_from_hand_made_runs(tmp_path: Path) ->
     assert lines[0].endswith("below on Acrobot-v1") and lines[1].startswith("does not hold: AUC interval")
 
 
+def test_mean_above_with_a_margin_from_hand_made_runs(tmp_path: Path) -> None:
+    """``mean_above`` with ``margin``: the candidate's mean normalised AUC over the envs against the reference's minus the
+    margin (a setup check's "level with")."""
+    study_module = load_script("study")
+    # Candidate 2.0 on every seed and env: normalised 0.2; DQN's 1, 2, 3, 4: mean 2.5, normalised 0.25
+    path, root = write_study(tmp_path, {env: [2.0, 2.0, 2.0, 2.0] for env in ENVS})
+    data = yaml.safe_load(path.read_text())
+    verdicts = {}
+    for margin in (0.0, 0.049, 0.051):
+        data["rule"] = [{"kind": "mean_above", "reference": "dqn", "measure": "auc", "margin": margin}]
+        path.write_text(yaml.safe_dump(data))
+        study = study_module.Study.read(path)
+        verdicts[margin] = study_module.verdict(study, *study_module.study_runs(study, root))
+    assert verdicts[0.0][0] == "does not hold" and verdicts[0.049][0] == "does not hold"
+    assert verdicts[0.051][0] == "holds"
+    assert verdicts[0.051][1][0] == "holds: mean normalised AUC above DQN's minus 0.051: 0.200 against 0.250"
+
+
 def test_minmax_normalisation_and_former_run_names(tmp_path: Path) -> None:
     """``normalisation: minmax``: per env over every run of the study's algorithms (computed by hand here); runs made under
     a former name (``run_names``) count as the study's algorithm."""
