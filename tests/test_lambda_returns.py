@@ -10,9 +10,10 @@ from stable_baselines3.common.logger import KVWriter, Logger
 from stable_baselines3.common.vec_env import VecNormalize
 
 from sb3_offon import OffOnDQN, OffOnReplayBuffer
+from sb3_offon.common import lambda_refresh
 from sb3_offon.common.buffers import discounted_returns
+from sb3_offon.common.lambda_returns import backward_recurrence, choose_blocks, compute_lambda_returns
 from sb3_offon.offon_dqn import lambda_training
-from sb3_offon.offon_dqn.lambda_returns import backward_recurrence, choose_blocks, compute_lambda_returns
 
 OBS_SPACE = spaces.Box(-np.inf, np.inf, shape=(1,), dtype=np.float32)
 N_ACTIONS = 5
@@ -487,9 +488,9 @@ def test_optimize_memory_usage_model_matches_the_formula():
 def test_the_refresh_pass_in_chunks_matches_one_pass(monkeypatch):
     model = OffOnDQN("MlpPolicy", "CartPole-v1", seed=0, buffer_size=1000, **SMALL, **LAMBDA)
     model.learn(200)
-    assert model._lambda_forward_rows() == lambda_training.LAMBDA_FORWARD_ROWS  # 16-byte observations: the rows bound
+    assert model._lambda_forward_rows() == lambda_refresh.LAMBDA_FORWARD_ROWS  # 16-byte observations: the rows bound
     observations = model.replay_buffer.next_observations[:150, 0]
-    monkeypatch.setattr(lambda_training, "LAMBDA_FORWARD_ROWS", 7)  # 22 chunks, the last one of 3 rows
+    monkeypatch.setattr(lambda_refresh, "LAMBDA_FORWARD_ROWS", 7)  # 22 chunks, the last one of 3 rows
     assert model._lambda_forward_rows() == 7
     values, actions = model._target_values_and_actions(observations)
     with th.no_grad():
@@ -504,4 +505,4 @@ def test_the_refresh_pass_keeps_image_chunks_small():
     env = FakeImageEnv(screen_height=84, screen_width=84, n_channels=4, discrete=True, channel_first=True)
     model = OffOnDQN("CnnPolicy", env, buffer_size=100, **LAMBDA)
     assert model._observation_bytes() == 4 * 4 * 84 * 84
-    assert model._lambda_forward_rows() == lambda_training.LAMBDA_FORWARD_BYTES // (4 * 4 * 84 * 84) == 74
+    assert model._lambda_forward_rows() == lambda_refresh.LAMBDA_FORWARD_BYTES // (4 * 4 * 84 * 84) == 74

@@ -7,8 +7,8 @@ import pytest
 from gymnasium import spaces
 
 from sb3_offon import OffOnNStepReplayBuffer, OffOnReplayBuffer
-from sb3_offon.offon_dqn import lambda_returns
-from sb3_offon.offon_dqn.lambda_returns import compute_lambda_returns
+from sb3_offon.common import lambda_returns
+from sb3_offon.common.lambda_returns import compute_lambda_returns
 from sb3_offon.offon_qrdqn.quantile_lambda_returns import compute_quantile_lambda_returns, project_mixture
 
 OBS_SPACE = spaces.Box(-np.inf, np.inf, shape=(1,), dtype=np.float32)

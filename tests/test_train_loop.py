@@ -12,7 +12,7 @@ from stable_baselines3.common.envs import SimpleMultiObsEnv
 
 import sb3_offon.offon_dqn.offon_dqn as offon_dqn_module
 from sb3_offon import PAPER_TARGETS, OffOnDQN
-from sb3_offon.offon_dqn import chunks
+from sb3_offon.common import chunks
 
 SMALL = dict(
     learning_starts=100,

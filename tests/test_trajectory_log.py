@@ -5,7 +5,7 @@ bookkeeping.
 The other λ tests compute their expected values from the buffer's own next actions and episode marks. Here random
 episodes (several envs whose episodes end at different steps, terminations, time-limit truncations, cuts by an env
 reset, a ring that wraps) are written both into the buffer and into a plain per-env log of what happened; returns and
-next actions are recomputed from the log alone, the λ-returns by the recursion of ``sb3_offon.offon_dqn.lambda_returns``:
+next actions are recomputed from the log alone, the λ-returns by the recursion of ``sb3_offon.common.lambda_returns``:
 
     G_t = R_t + gamma^k [(1 - λ c) V(s_{t+k}) + λ c G_{t+n}]
 
@@ -18,7 +18,7 @@ import pytest
 from gymnasium import spaces
 
 from sb3_offon import OffOnNStepReplayBuffer, OffOnReplayBuffer
-from sb3_offon.offon_dqn.lambda_returns import compute_lambda_returns
+from sb3_offon.common.lambda_returns import compute_lambda_returns
 
 N_ACTIONS = 5
 OBS_SPACE = spaces.Box(-np.inf, np.inf, shape=(1,), dtype=np.float32)

@@ -13,8 +13,8 @@ from stable_baselines3.common.vec_env import VecNormalize
 from stable_baselines3.dqn.policies import QNetwork
 
 from sb3_offon.common.buffers import OffOnDictReplayBufferSamples, OffOnReplayBufferSamples
+from sb3_offon.common.chunks import rows_of
 from sb3_offon.common.prioritized_buffers import PrioritizedBufferMixin
-from sb3_offon.offon_dqn.chunks import rows_of
 
 Samples = OffOnReplayBufferSamples | OffOnDictReplayBufferSamples
 

@@ -15,12 +15,12 @@ from sb3_offon.common.buffers import (
     OffOnBufferMixin,
     reward_scale,
 )
+from sb3_offon.common.chunks import ChunkedMinibatchesMixin
+from sb3_offon.common.lambda_returns import LambdaReturnCache
 from sb3_offon.common.non_finite import NON_FINITE_OPTIONS, NonFiniteChecksMixin
 from sb3_offon.common.offon_model import OffOnReplayMixin, check_lambda_arguments, check_option, check_positive_integer
 from sb3_offon.common.prioritized_buffers import PrioritizedBufferMixin
-from sb3_offon.offon_dqn.chunks import ChunkedMinibatchesMixin
 from sb3_offon.offon_dqn.coin_flip_targets import CoinFlipTargetsMixin
-from sb3_offon.offon_dqn.lambda_returns import LambdaReturnCache
 from sb3_offon.offon_dqn.lambda_training import LambdaTrainingMixin
 from sb3_offon.offon_dqn.policies import CnnPolicy, MlpPolicy, MultiInputPolicy, OffOnDQNPolicy
 
@@ -138,7 +138,7 @@ class OffOnDQN(
     network, on the same batch. The online network behind an argmax is the one of the moment the target is computed:
 
     - coin-flip modes: at the start of each chunk of gradient steps (one chunk holds all of a training call's steps
-      unless their observations pass 64 MiB, see :mod:`sb3_offon.offon_dqn.chunks`), so at most ``gradient_steps``
+      unless their observations pass 64 MiB, see :mod:`sb3_offon.common.chunks`), so at most ``gradient_steps``
       - 1 steps older than the step that trains on it, as the target network's values are (SB3's own double-DQN-less
       loop would take it at each step);
     - a truncated episode's bootstrap: when the episode ends, never refreshed (as with ``double_q=False``);

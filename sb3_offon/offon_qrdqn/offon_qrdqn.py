@@ -9,13 +9,13 @@ from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedul
 from stable_baselines3.common.utils import LinearSchedule
 
 from sb3_offon.common.buffers import OffOnBufferMixin
+from sb3_offon.common.chunks import ChunkedMinibatchesMixin
+from sb3_offon.common.lambda_refresh import LambdaRefreshMixin
+from sb3_offon.common.lambda_returns import LambdaReturnCache
 from sb3_offon.common.non_finite import NON_FINITE_OPTIONS
 from sb3_offon.common.offon_model import OffOnReplayMixin, check_lambda_arguments, check_option
 from sb3_offon.common.prioritized_buffers import PrioritizedBufferMixin
 from sb3_offon.common.quantile_loss import WeightedQuantileHuberLoss, quantile_huber_loss
-from sb3_offon.offon_dqn.chunks import ChunkedMinibatchesMixin
-from sb3_offon.offon_dqn.lambda_returns import LambdaReturnCache
-from sb3_offon.offon_dqn.lambda_training import LambdaRefreshMixin
 from sb3_offon.offon_qrdqn.quantile_lambda_returns import LAMBDA_FORMS, compute_quantile_lambda_returns
 from sb3_offon.qrdqn import QRDQN
 

@@ -1,7 +1,7 @@
 """
 The distributional lambda-returns of OffOnQRDQN: per stored transition, N target atoms for the law of the lambda-return,
 computed at a refresh from one batched pass of the target network over the transitions' next states, as DQN(lambda)
-computes scalar ones (:mod:`sb3_offon.offon_dqn.lambda_returns`, whose blocks, windows and trace cuts are reused).
+computes scalar ones (:mod:`sb3_offon.common.lambda_returns`, whose blocks, windows and trace cuts are reused).
 
 For a transition t, with Z(s) = Z_target(s, a*) the target network's N quantiles at the bootstrap action a* (the argmax
 of their mean; of the online network's with ``double_q``), the law of the lambda-return is
@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from sb3_offon.common.buffers import OffOnBufferMixin
-from sb3_offon.offon_dqn.lambda_returns import LambdaLayout, LambdaReturnCache, backward_recurrence, lambda_layout
+from sb3_offon.common.lambda_returns import LambdaLayout, LambdaReturnCache, backward_recurrence, lambda_layout
 
 LAMBDA_FORMS = ("sampled", "projected")
 
