@@ -50,8 +50,35 @@ def check_positive_integer(name: str, value: Any) -> None:
     :raises ValueError: naming the parameter, unless ``value`` is an integer of at least 1 (SB3 would make a buffer of
         one transition from a ``buffer_size`` of 0 or below, and QR-DQN fail at its first gradient step with no quantile)
     """
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral) or value < 1:
+    if not integer(value) or value < 1:
         raise ValueError(f"`{name}` must be a positive integer, got {value!r}")
+
+
+def integer(value: Any) -> bool:
+    """Whether ``value`` is an integer (NumPy's too), and not a bool."""
+    return isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_))
+
+
+def check_training_arguments(model: Any) -> None:
+    """
+    Check the off-policy arguments that SB3 takes unchecked, for OffOnDQN, OffOnQRDQN and the package's QRDQN:
+    ``batch_size``, ``n_steps``, ``train_freq``, ``gradient_steps``, ``target_update_interval`` and
+    ``learning_starts``. Without it, a ``batch_size`` of 0 fails at the first gradient step ("need at least one array to
+    concatenate"), an ``n_steps`` of 0 trains silently on nothing, and a negative ``learning_starts`` is taken as 0.
+    ``gradient_steps`` may be 0 (no training, SB3's special case) or -1 (as many as env steps in the rollout).
+
+    :raises ValueError: naming the first bad parameter
+    """
+    for name in ("batch_size", "n_steps", "target_update_interval"):
+        check_positive_integer(name, getattr(model, name, 1))  # getattr: SB3 versions before n_steps
+    if not integer(model.gradient_steps) or model.gradient_steps < -1:
+        raise ValueError(f"`gradient_steps` must be a non-negative integer or -1, got {model.gradient_steps!r}")
+    if not integer(model.learning_starts) or model.learning_starts < 0:
+        raise ValueError(f"`learning_starts` must be a non-negative integer, got {model.learning_starts!r}")
+    # An int, a (frequency, unit) tuple, or SB3's TrainFreq (a loaded model's); the unit is SB3's to check
+    frequency = model.train_freq[0] if isinstance(model.train_freq, tuple) else model.train_freq
+    if not integer(frequency) or frequency < 1:
+        raise ValueError(f"`train_freq` must be a positive integer or a (frequency, unit) tuple, got {model.train_freq!r}")
 
 
 def check_lambda_arguments(model: Any) -> None:

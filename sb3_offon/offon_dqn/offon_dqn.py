@@ -18,7 +18,13 @@ from sb3_offon.common.buffers import (
 from sb3_offon.common.chunks import ChunkedMinibatchesMixin
 from sb3_offon.common.lambda_returns import LambdaReturnCache
 from sb3_offon.common.non_finite import NON_FINITE_OPTIONS, NonFiniteChecksMixin
-from sb3_offon.common.offon_model import OffOnReplayMixin, check_lambda_arguments, check_option, check_positive_integer
+from sb3_offon.common.offon_model import (
+    OffOnReplayMixin,
+    check_lambda_arguments,
+    check_option,
+    check_positive_integer,
+    check_training_arguments,
+)
 from sb3_offon.common.prioritized_buffers import PrioritizedBufferMixin
 from sb3_offon.offon_dqn.coin_flip_targets import CoinFlipTargetsMixin
 from sb3_offon.offon_dqn.lambda_training import LambdaTrainingMixin
@@ -339,6 +345,7 @@ class OffOnDQN(
     def _check_offon_arguments(self) -> None:
         # Run by _setup_model rather than __init__: load()'s kwargs and custom_objects reach the model without __init__
         check_positive_integer("buffer_size", self.buffer_size)
+        check_training_arguments(self)
         check_lambda_arguments(self)
         for name, options in (
             ("non_finite", NON_FINITE_OPTIONS),

@@ -13,7 +13,7 @@ from sb3_offon.common.chunks import ChunkedMinibatchesMixin
 from sb3_offon.common.lambda_refresh import LambdaRefreshMixin
 from sb3_offon.common.lambda_returns import LambdaReturnCache
 from sb3_offon.common.non_finite import NON_FINITE_OPTIONS
-from sb3_offon.common.offon_model import OffOnReplayMixin, check_lambda_arguments, check_option
+from sb3_offon.common.offon_model import OffOnReplayMixin, check_lambda_arguments, check_option, check_training_arguments
 from sb3_offon.common.prioritized_buffers import PrioritizedBufferMixin
 from sb3_offon.common.quantile_loss import WeightedQuantileHuberLoss, quantile_huber_loss
 from sb3_offon.offon_qrdqn.quantile_lambda_returns import LAMBDA_FORMS, compute_quantile_lambda_returns
@@ -239,6 +239,7 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
 
     def _check_offon_arguments(self) -> None:
         # Run by _setup_model rather than __init__: load()'s kwargs and custom_objects reach the model without __init__
+        check_training_arguments(self)  # before the buffer is built from them (QRDQN's _setup_model checks them again)
         check_lambda_arguments(self)
         for name, options, what in (
             ("mc_mixing", SUPPORTED_MC_MIXING, "OffOnDQN's coin-flip modes are not supported by OffOnQRDQN"),

@@ -5,15 +5,17 @@ on one CPU thread when it trains every 4 steps on MinAtar (sb3-contrib's loss wa
 figures: docs/qrdqn.md).
 """
 
+import inspect
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
+from typing import Any
 
 import sb3_contrib
 from sb3_contrib.qrdqn import qrdqn as sb3_contrib_qrdqn
 
 from sb3_offon.common.non_finite import NonFiniteChecksMixin
-from sb3_offon.common.offon_model import check_positive_integer
+from sb3_offon.common.offon_model import check_positive_integer, check_training_arguments
 from sb3_offon.common.quantile_loss import quantile_huber_loss
 
 _swap_lock = threading.Lock()
@@ -53,13 +55,22 @@ class QRDQN(NonFiniteChecksMixin, sb3_contrib.QRDQN):
     Paper: https://arxiv.org/abs/1710.10044
 
     The constructor is sb3-contrib's: ``QRDQN(policy, env, ...)`` with the same arguments and defaults. Added: a
-    ``buffer_size`` or ``n_quantiles`` below 1 is a ``ValueError`` naming it, and a non-finite reward or loss stops
-    training with an error naming the env and step (:mod:`sb3_offon.common.non_finite`; set the attribute
-    ``non_finite = "skip"`` to skip steps with a non-finite reward instead).
+    ``buffer_size``, ``n_quantiles``, ``batch_size``, ``n_steps``, ``train_freq`` or ``target_update_interval``
+    below 1, a ``gradient_steps`` below -1 or a negative ``learning_starts`` is a ``ValueError`` naming it, and a
+    non-finite reward or loss stops training with an error naming the env and step
+    (:mod:`sb3_offon.common.non_finite`; set the attribute ``non_finite = "skip"`` to skip steps with a non-finite
+    reward instead).
     """
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        # sb3-contrib's constructor divides by batch_size (Adam's eps) before _setup_model checks the rest
+        arguments = inspect.signature(sb3_contrib.QRDQN.__init__).bind(self, *args, **kwargs).arguments
+        check_positive_integer("batch_size", arguments.get("batch_size", 32))
+        super().__init__(*args, **kwargs)
 
     def _setup_model(self) -> None:
         check_positive_integer("buffer_size", self.buffer_size)
+        check_training_arguments(self)
         check_positive_integer("n_quantiles", self.policy_kwargs.get("n_quantiles", 200))
         super()._setup_model()
 
