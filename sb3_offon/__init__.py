@@ -13,6 +13,7 @@ from sb3_offon.common.buffers import (
     OffOnReplayBuffer,
     OffOnReplayBufferSamples,
 )
+from sb3_offon.common.lambda_horizons import lambda_for_horizon
 from sb3_offon.common.prioritized_buffers import (
     PrioritizedOffOnDictReplayBuffer,
     PrioritizedOffOnNStepReplayBuffer,
@@ -46,4 +47,5 @@ __all__ = [
     "PrioritizedOffOnDictReplayBuffer",
     "PrioritizedOffOnNStepReplayBuffer",
     "PrioritizedOffOnReplayBuffer",
+    "lambda_for_horizon",
 ]

@@ -374,7 +374,12 @@ class OffOnBufferMixin:
         return self._n_adds - added_at <= kept
 
     def lambda_inputs(
-        self, slots: np.ndarray, envs: np.ndarray, gamma: float, env: VecNormalize | None = None
+        self,
+        slots: np.ndarray,
+        envs: np.ndarray,
+        gamma: float,
+        env: VecNormalize | None = None,
+        lengths: np.ndarray | None = None,
     ) -> dict[str, Any]:
         """
         What the lambda-return recursion needs of the transitions at ``(slots, envs)``, as NumPy arrays.
@@ -385,21 +390,24 @@ class OffOnBufferMixin:
         SB3's ``NStepReplayBuffer``; the fields below ending in "at e" are those of the window's last transition.
 
         :param gamma: the discount of the rewards within a window
+        :param lengths: each transition's own window length in steps, in place of ``n_steps`` (the horizons that
+            OffOnQRDQN's ``lambda_cache=False`` draws), shortened likewise where the episode did not go on
         :return: ``rewards`` (sum over the window of gamma^i r_{t+i}, the rewards normalised as ``sample()`` normalises
             them), ``discounts`` (gamma^k), ``next_actions`` (at e; -1: the episode did not go on from e, always the
             case when k < n_steps), ``terminated`` (e ended its episode by termination, not by a time limit),
             ``running_newest`` (e is the newest transition of an episode still running), ``next_observations``
-            (s_{t+k}, normalised as ``sample()`` normalises them)
+            (s_{t+k}, normalised as ``sample()`` normalises them), ``lengths`` (k)
         """
-        n_steps = self.n_steps
+        wanted = np.full(len(slots), self.n_steps) if lengths is None else np.asarray(lengths, dtype=np.int64)
+        n_steps = int(wanted.max()) if len(wanted) else 1
         offsets = np.arange(n_steps)
         window = (slots[:, None] + offsets) % self.buffer_size
         # The window stops at its first step whose episode did not go on (recorded next action -1): an episode's end,
         # a reset, or the newest transition; so it never reaches past the newest transition into older data
-        lengths = np.full(len(slots), n_steps)
+        lengths = wanted
         if n_steps > 1:
-            stops = self.next_actions[window[:, :-1], envs[:, None]] < 0
-            lengths = np.where(stops.any(axis=1), stops.argmax(axis=1) + 1, n_steps)
+            stops = (self.next_actions[window[:, :-1], envs[:, None]] < 0) & (offsets[:-1] < wanted[:, None] - 1)
+            lengths = np.where(stops.any(axis=1), stops.argmax(axis=1) + 1, wanted)
         ends = window[np.arange(len(slots)), lengths - 1]
         window_rewards = self._normalize_reward(self.rewards[window, envs[:, None]], env)  # type: ignore[attr-defined]
         rewards = np.where(offsets < lengths[:, None], window_rewards * gamma**offsets, 0.0).sum(axis=1)
@@ -416,6 +424,7 @@ class OffOnBufferMixin:
         return {
             "rewards": rewards,
             "discounts": gamma ** lengths.astype(np.float64),
+            "lengths": lengths,
             "next_actions": self.next_actions[ends, envs],
             "terminated": (dones * (1 - timeouts)) > 0,
             "running_newest": (ends == newest_slot) & running[envs],

@@ -82,7 +82,8 @@ class LambdaReturnCache:
     :param slots: the transitions' slots in the replay buffer
     :param envs: their env columns
     :param added_at: their absolute add indices (to tell a slot overwritten since)
-    :param returns: their lambda-returns, float32, in the units of the rewards the networks learn from
+    :param returns: their lambda-returns, float32, in the units of the rewards the networks learn from (a tensor on
+        the device for the per-call targets of OffOnQRDQN's ``lambda_cache=False``)
     :param key: what identifies the target network they were computed with (OffOnDQN's refresh key)
     :param lam: lambda (delta1) of the refresh
     :param qlearning_prob: delta2 of the refresh
@@ -93,7 +94,7 @@ class LambdaReturnCache:
     slots: np.ndarray
     envs: np.ndarray
     added_at: np.ndarray
-    returns: np.ndarray
+    returns: Any  # np.ndarray, or a torch tensor (see above)
     key: int
     lam: float
     qlearning_prob: float

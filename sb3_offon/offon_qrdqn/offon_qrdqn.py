@@ -10,6 +10,7 @@ from stable_baselines3.common.utils import LinearSchedule
 
 from sb3_offon.common.buffers import OffOnBufferMixin
 from sb3_offon.common.chunks import ChunkedMinibatchesMixin
+from sb3_offon.common.lambda_horizons import sample_horizon_returns
 from sb3_offon.common.lambda_refresh import LambdaRefreshMixin
 from sb3_offon.common.lambda_returns import LambdaReturnCache
 from sb3_offon.common.non_finite import NON_FINITE_OPTIONS
@@ -68,6 +69,14 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
     before its runs, found the two level (mean normalised AUC 0.928 against 0.924 over CartPole-v1 and Acrobot-v1,
     seeds 0-1) and kept the sampled form (``results/qr_lambda_form/README.md``); the projected form stays as an option.
 
+    ``lambda_cache=False`` trains without the cache: each training call draws its minibatches uniformly from the whole
+    buffer, as QR-DQN does, and each sample gets a horizon drawn from the lambda-return's weights, its target that
+    horizon's law from the target network of the moment (:mod:`sb3_offon.common.lambda_horizons`). A transition gets a
+    fresh horizon each time it is sampled, the newest transitions are trained on as soon as they are stored, and the
+    cost per gradient step is n-step QR-DQN's: one target row per sample. It needs Peng's Q(lambda) (delta2 = 0) and
+    the sampled form; ``lambda_block_size`` is then the longest horizon drawn, and prioritised replay is not supported.
+    With lambda = 0 it is n-step QR-DQN (``n_steps``) on the same samples.
+
     What OffOnQRDQN does not have: OffOnDQN's coin-flip modes (``mc_mixing`` other than ``"lambda"``), the squared error
     (``loss="mse"``) and dueling networks (``policy_kwargs=dict(dueling=True)``), each a ``ValueError``;
     ``sarsa_target`` is accepted and plays no part, as in OffOnDQN's lambda mode. The buffer is an Off-On buffer (its
@@ -117,6 +126,8 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
     :param double_q: the online network picks the bootstrap action (the argmax of its quantiles' mean), the target
         network's quantiles at that action are the bootstrap law; the trace-cut test uses that action too
     :param lambda_form: ``"sampled"`` (default) or ``"projected"`` (see above)
+    :param lambda_cache: True (default): train on the cached lambda-returns of each refresh; False: draw a horizon per
+        sample at each training call, from the whole buffer (see above)
     :param non_finite: what a non-finite reward does: ``"raise"`` (default) a ``NonFiniteError`` naming the env and step,
         nothing of that step stored; ``"skip"`` a warning, the step's transitions not stored and the running episodes
         cut there as truncations. A non-finite loss always raises (:mod:`sb3_offon.common.non_finite`)
@@ -174,6 +185,7 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
         lambda_refresh_interval: int | None = None,
         double_q: bool = False,
         lambda_form: str = "sampled",
+        lambda_cache: bool = True,
         non_finite: str = "raise",
         stats_window_size: int = 100,
         tensorboard_log: str | None = None,
@@ -227,6 +239,7 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
         self.lambda_refresh_interval = lambda_refresh_interval
         self.double_q = double_q
         self.lambda_form = lambda_form
+        self.lambda_cache = lambda_cache
         self.non_finite = non_finite
         self._check_buffer_discounting()
         # The sampled horizons have a generator of their own (saved with the model: a resumed run draws on)
@@ -251,6 +264,7 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
                 check_option(name, getattr(self, name), options)
             except ValueError as error:
                 raise ValueError(f"{error}{f' ({what})' if what else ''}") from None
+        self._check_lambda_cache()
         if not isinstance(self.sarsa_target, str):
             raise ValueError(f"`sarsa_target` must be a string, got {self.sarsa_target!r}")
         if "dueling" in (self.policy_kwargs or {}):
@@ -259,6 +273,25 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
                 "`policy_kwargs['dueling']`: dueling networks are OffOnDQN's only; OffOnQRDQN's quantile network is "
                 "QR-DQN's (remove the key)"
             )
+
+    def _check_lambda_cache(self) -> None:
+        """What training without the cache (``lambda_cache=False``) needs."""
+        # getattr: models saved before lambda_cache existed load with the cache, as they trained
+        self.lambda_cache = getattr(self, "lambda_cache", True)
+        if not isinstance(self.lambda_cache, (bool, np.bool_)):
+            raise ValueError(f"`lambda_cache` must be True or False, got {self.lambda_cache!r}")
+        if self.lambda_cache:
+            return
+        if self.lambda_form != "sampled":
+            raise ValueError("`lambda_form`: without the cache (`lambda_cache=False`) the horizons are sampled; use 'sampled'")
+        if self.qlearning_initial_prob != 0.0 or self.qlearning_final_prob != 0.0:
+            raise ValueError(
+                "`qlearning_initial_prob`, `qlearning_final_prob`: without the cache (`lambda_cache=False`) the trace is "
+                "Peng's, never cut (delta2 = 0)"
+            )
+        buffer_class = self.replay_buffer_class
+        if isinstance(buffer_class, type) and issubclass(buffer_class, PrioritizedBufferMixin):
+            raise ValueError("`replay_buffer_class`: prioritised replay needs the cache (`lambda_cache=True`)")
 
     def _setup_model(self) -> None:
         self._check_offon_arguments()
@@ -327,10 +360,48 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
             env=self._vec_normalize_env,
         )
 
+    def _draw_lambda_entries(self, n_samples: int) -> tuple[LambdaReturnCache, np.ndarray]:
+        """With the cache, its entries (refreshed first if due); without it, ``n_samples`` fresh targets, in order."""
+        if self.lambda_cache:
+            return super()._draw_lambda_entries(n_samples)
+        return self._horizon_targets(n_samples), np.arange(n_samples)
+
+    def _horizon_targets(self, n_samples: int) -> LambdaReturnCache:
+        """
+        ``n_samples`` transitions drawn from the whole buffer, each with a drawn horizon's target law, computed with
+        the target network of the moment and left on the device (no read-back), in the cache's layout.
+        """
+        assert isinstance(self.replay_buffer, OffOnBufferMixin)
+        samples = sample_horizon_returns(
+            self.replay_buffer,
+            n_samples,
+            lam=self.mc_prob,
+            longest=self.lambda_block_size,
+            gamma=self.gamma,
+            cut_is_terminal=self.mc_truncation == "terminal",
+            rng=self.target_rng,
+            env=self._vec_normalize_env,
+        )
+        quantiles = self._forward_in_chunks(samples.next_observations, self._bootstrap_quantiles)[0]  # (n, N)
+        rewards = self._to_device(samples.rewards.astype(np.float32).reshape(-1, 1))
+        discounts = self._to_device(samples.discounts.astype(np.float32).reshape(-1, 1))
+        self.logger.record("train/mean_horizon", float(samples.horizons.mean()))
+        return LambdaReturnCache(
+            slots=samples.slots,
+            envs=samples.envs,
+            added_at=samples.added_at,
+            returns=rewards + discounts * quantiles,
+            key=self._lambda_refresh_key(),
+            lam=self.mc_prob,
+            qlearning_prob=0.0,
+            trace_cut_fraction=0.0,
+        )
+
     def train(self, gradient_steps: int, batch_size: int = 100) -> None:
         """
         ``gradient_steps`` updates of the quantile network towards the cached distributional lambda-returns (refreshed
-        first if due), the minibatches gathered and uploaded in chunks, the loss read back once at the end.
+        first if due; with ``lambda_cache=False``, towards fresh targets of drawn horizons), the minibatches gathered
+        and uploaded in chunks, the loss read back once at the end.
         """
         assert isinstance(self.replay_buffer, OffOnBufferMixin)
         self.mc_prob = self.mc_schedule(self._current_progress_remaining)
@@ -348,12 +419,16 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
         return list(self.policy.parameters())
 
     def _lambda_chunk_tensors(
-        self, actions: np.ndarray, returns: np.ndarray, weights: np.ndarray | None
+        self, actions: np.ndarray, returns: np.ndarray | th.Tensor, weights: np.ndarray | None
     ) -> tuple[th.Tensor, th.Tensor, th.Tensor | None]:
-        """A chunk's actions repeated over the quantiles (to gather them), its N target atoms per sample, its weights."""
+        """
+        A chunk's actions repeated over the quantiles (to gather them), its N target atoms per sample (already on the
+        device without the cache), its weights.
+        """
         actions_tensor = self._to_device(actions.reshape(-1, 1, 1)).long().expand(-1, self.n_quantiles, 1)
         weights_tensor = None if weights is None else self._to_device(weights)
-        return actions_tensor, self._to_device(returns), weights_tensor
+        targets = returns if isinstance(returns, th.Tensor) else self._to_device(returns)
+        return actions_tensor, targets, weights_tensor
 
     def _lambda_step_loss(
         self, observations: Any, actions: th.Tensor, targets: th.Tensor, weights: th.Tensor | None
