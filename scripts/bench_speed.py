@@ -8,8 +8,9 @@ lambda 0.9, Peng's Q(lambda)); ``paper``, the paper's coin flips (``PAPER_TARGET
 (lambda 0.9, Watkins's cuts); ``double_q``, the defaults with double Q-learning. The baseline (``--baseline``, the "DQN"
 columns): SB3's DQN, SB3's DQN with ``n_steps=10`` (``dqn_nstep``), or OffOnDQN with its defaults (``offon_defaults``,
 to measure what an option of OffOnDQN costs). ``--candidate offon_qrdqn`` measures the QR-DQN family instead: OffOnQRDQN
-(``--mode defaults``, its constructor's; ``projected``, the projected recursion; ``double_q``) against
-``sb3_offon.qrdqn.QRDQN`` (``--baseline qrdqn``, its default then), both with QR-DQN's default 200 quantiles.
+(``--mode defaults``, its constructor's; ``projected``, the projected recursion; ``no_cache``, no cache and lambda 0.67;
+``double_q``) against ``sb3_offon.qrdqn.QRDQN`` (``--baseline qrdqn``, its default then), both with QR-DQN's default
+200 quantiles.
 ``--baseline qrdqn_nstep`` is that QR-DQN with ``n_steps=3`` (MinAtar's n): against OffOnDQN, it measures what the
 quantile critic costs next to the defaults; against OffOnQRDQN, what lambda-returns cost next to n-step returns. Tables and
 JSON keep the roles' names ("DQN" the baseline, "OffOnDQN" the candidate) and say which classes they are.
@@ -148,6 +149,8 @@ MODES = {
     "lambda": LAMBDA_TARGETS,
     "double_q": dict(double_q=True),
     "projected": dict(lambda_form="projected"),  # OffOnQRDQN only
+    # OffOnQRDQN only: no cache, a horizon drawn per sample, lambda at the contraction of a 3-step return (gamma 0.99)
+    "no_cache": dict(lambda_cache=False, mc_initial_prob=0.67, mc_final_prob=0.67),
     "per": dict(replay_buffer_class=PrioritizedOffOnReplayBuffer),  # prioritised replay, Rainbow's alpha 0.5, beta 0.4
 }
 # --candidate: the class of the "OffOnDQN" runs, and the baseline it is measured against unless --baseline says
