@@ -10,9 +10,12 @@ Every flag of ``python -m rl_zoo3.train`` works (``--algo``, ``--env``, ``-n``, 
 Additions to the zoo's command line: ``--help`` opens with the algorithms this package adds (read from
 :data:`sb3_offon.zoo.ALGOS`) and where their settings are documented; an invalid value of one of OffOnDQN's own
 arguments (``--hyperparams mc_mixing:foo``) ends with one line naming the argument and its allowed values, on stderr
-with exit status 2 as argparse's errors, instead of a traceback, and so do an unknown hyperparameter (with the close
-matches) and a ``--resume`` refused (another algorithm, env, hyperparameters or budget; no complete checkpoint); a
-non-finite reward or loss ends the run with one line and exit status 1 (:mod:`sb3_offon.common.non_finite`);
+with exit status 2 as argparse's errors, instead of a traceback, and so do an unknown ``--algo`` or env id or
+hyperparameter (with the close matches), an env whose action space the algorithm cannot take (a continuous one for
+the DQN family) and a ``--resume`` refused (another algorithm, env, hyperparameters or budget; no complete checkpoint);
+a run on a bundled file's ``default`` entry (no settings for its env) is warned about in one line; a non-finite reward
+or loss ends the run with one line and exit status 1 (:mod:`sb3_offon.common.non_finite`); Ctrl-C ends it with one
+line, the newest checkpoint and the command that goes on from it, and exit status 130 (:func:`interruption_line`);
 checkpoints to resume a run from (``--checkpoint-freq``, ``--resume``); one torch thread unless ``--num-threads`` says
 otherwise; and denormal floats flushed to zero on the CPU
 unless ``--keep-denormals`` (see :func:`flush_denormals_unless_kept`).
@@ -24,9 +27,12 @@ Example::
 """
 
 import argparse
+import difflib
 import re
+import shlex
 import sys
 import traceback
+import warnings
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -41,6 +47,8 @@ DEFAULT_NUM_THREADS = 1
 ARGUMENT_ERROR = re.compile(r"^`(?P<name>\w+)` must be ")
 # rl_zoo3.train's error for an env id that is not registered
 UNKNOWN_ENV = re.compile(r"^(?P<env>\S+) not found in gym registry")
+# The exit status of a command stopped by Ctrl-C: the shell's for a process ended by SIGINT (128 + 2)
+INTERRUPTED = 130
 
 
 def prog() -> str:
@@ -166,7 +174,7 @@ def add_package_arguments(parser: argparse.ArgumentParser) -> None:
 class DescribedArgumentParser(argparse.ArgumentParser):
     """
     An ``argparse.ArgumentParser`` whose help opens with :func:`help_description` (before the long usage line), with the
-    options of :func:`add_package_arguments`.
+    options of :func:`add_package_arguments`, and whose error for an unknown ``--algo`` is one line.
     """
 
     description_text = ""
@@ -179,6 +187,23 @@ class DescribedArgumentParser(argparse.ArgumentParser):
     def format_help(self) -> str:
         """The description as it is written, then argparse's help (usage, options)."""
         return f"{self.description_text}\n\n{super().format_help()}"
+
+    def _check_value(self, action: argparse.Action, value: object) -> None:
+        """
+        argparse's check of a value against its option's choices; an unknown ``--algo`` is one line with the close
+        names (argparse's own error prints the whole usage and every name).
+
+        argparse has no public hook for this check: should a Python release rename the method, an unknown ``--algo``
+        gets argparse's own error again (tests/test_cli_first_minutes.py would say so).
+
+        :param action: the option
+        :param value: the value given
+        """
+        if action.dest == "algo" and action.choices is not None and value not in action.choices:
+            close = difflib.get_close_matches(str(value), [str(choice) for choice in action.choices], n=3, cutoff=0.6)
+            hint = f"close matches: {', '.join(close)}" if close else "no name is close to it"
+            self.exit(2, f"{self.prog}: error: unknown --algo '{value}'; {hint} (--help lists them all)\n")
+        super()._check_value(action, value)
 
 
 def describe_help(module: ModuleType, algos: dict[str, type], summaries: dict[str, str] | None = None) -> None:
@@ -248,6 +273,95 @@ def argument_errors_in_one_line() -> Iterator[None]:
 
 
 @contextmanager
+def warnings_in_one_line(categories: tuple[type[Warning], ...]) -> Iterator[None]:
+    """
+    Show the warnings of ``categories`` as one line on stderr, "<prog>: warning: ...", as the command line's errors are
+    shown (Python's own format adds the file, line and source of the call, which are no help to the user); other
+    warnings as Python shows them.
+
+    :param categories: the warning classes to show so
+    """
+    shown = warnings.showwarning
+
+    def show(message: Warning | str, category: type[Warning], *location: object, **keywords: object) -> None:
+        if issubclass(category, categories):
+            print(f"{prog()}: warning: {message}", file=sys.stderr)
+        else:
+            shown(message, category, *location, **keywords)  # type: ignore[arg-type]
+
+    warnings.showwarning = show
+    try:
+        yield
+    finally:
+        warnings.showwarning = shown
+
+
+def resume_command(argv: list[str], folder: str | Path) -> str:
+    """
+    The command that goes on with an interrupted run: its own, with ``--resume folder`` in place of its
+    ``--checkpoint-dir`` and ``--resume`` (a resumed run checkpoints into the folder it resumes from), quoted for a
+    POSIX shell.
+
+    :param argv: the interrupted command's arguments, as typed (without the program name)
+    :param folder: the folder of its checkpoints
+    :return: the command line
+    """
+    kept: list[str] = []
+    skip = False
+    for argument in argv:
+        if skip:
+            skip = False
+        elif argument in ("--resume", "--checkpoint-dir"):
+            skip = True
+        elif not argument.startswith(("--resume=", "--checkpoint-dir=")):
+            kept.append(argument)
+    return shlex.join([*shlex.split(prog()), *kept, "--resume", str(folder)])
+
+
+def interruption_line(argv: list[str], interruption: KeyboardInterrupt) -> str:
+    """
+    What the command line says when Ctrl-C stopped it: the step it reached, and either the newest complete checkpoint
+    on disk with the command that goes on from it, or that there is none to resume from.
+
+    :param argv: the command's arguments, as typed (without the program name)
+    :param interruption: the interruption; a :class:`sb3_offon.zoo.RunInterrupted` (training was stopped, and the zoo
+        saved the model) says where the run's checkpoints are, another one (before or after training) is looked up in
+        ``--checkpoint-dir`` or ``--resume``
+    :return: the line, without its newline
+    """
+    from sb3_offon.resume import checkpoint_folders, checkpoint_problem
+    from sb3_offon.zoo import RunInterrupted, checkpoint_folder
+
+    if isinstance(interruption, RunInterrupted):
+        folder = interruption.checkpoint_dir
+        where = f"at step {interruption.num_timesteps} of {interruption.budget}"
+        saved = f"; the model trained so far is saved in {interruption.save_path}"
+    else:
+        known = argparse.ArgumentParser(add_help=False)
+        known.add_argument("--checkpoint-dir")
+        known.add_argument("--resume")
+        options, _ = known.parse_known_args(argv)
+        folder = options.checkpoint_dir or checkpoint_folder(options.resume)
+        # Ctrl-C in training reaches here as RunInterrupted (the zoo's manager): this one came in the setup or the saving
+        where, saved = "while the run was set up or saved", ""
+    if folder is not None:
+        # The newest complete one, the one --resume takes (a checkpoint being written when Ctrl-C came is not)
+        newest = next((path for path in checkpoint_folders(folder) if checkpoint_problem(path) is None), None)
+        if newest is not None:
+            return (
+                f"{prog()}: interrupted (Ctrl-C) {where}; newest checkpoint: step {newest.name} in {folder}; to go on "
+                f"from it: {resume_command(argv, folder)}"
+            )
+    if not isinstance(interruption, RunInterrupted):
+        why = ""
+    elif interruption.checkpoint_freq > 0:
+        why = f", before its first checkpoint (--checkpoint-freq {interruption.checkpoint_freq})"
+    else:
+        why = ", without checkpoints (--checkpoint-freq STEPS writes them)"
+    return f"{prog()}: interrupted (Ctrl-C) {where}{why}: no checkpoint to resume from{saved}"
+
+
+@contextmanager
 def run_errors_in_one_line(
     usage_errors: tuple[type[BaseException], ...], run_errors: tuple[type[BaseException], ...]
 ) -> Iterator[None]:
@@ -268,8 +382,14 @@ def run_errors_in_one_line(
         raise SystemExit(1) from None
 
 
-def main() -> None:
-    """Register the algorithms, then run the zoo's command line on ``sys.argv``."""
+def main() -> int:
+    """
+    Register the algorithms, then run the zoo's command line on ``sys.argv``.
+
+    :return: the exit status: 0, or 130 when Ctrl-C stopped the command (after one line on stderr, see
+        :func:`interruption_line`; the zoo has saved the model trained so far when it stopped training). Errors exit
+        through ``SystemExit``
+    """
     # Imported here, not at the top: without the zoo extra, a one-line hint instead of a traceback
     with zoo_required():
         import rl_zoo3.train as zoo_train
@@ -277,17 +397,34 @@ def main() -> None:
         from sb3_offon.cli_args import use_tolerant_store_dict
         from sb3_offon.common.non_finite import NonFiniteError
         from sb3_offon.resume import CheckpointError
-        from sb3_offon.zoo import ALGO_SUMMARIES, ALGOS, HyperparameterError, UnknownHyperparameterError, register
+        from sb3_offon.zoo import (
+            ALGO_SUMMARIES,
+            ALGOS,
+            DefaultHyperparametersWarning,
+            HyperparameterError,
+            UnknownHyperparameterError,
+            UnsupportedActionSpaceError,
+            register,
+        )
     register()
     describe_help(zoo_train, ALGOS, ALGO_SUMMARIES)
     # ``--hyperparams mc_mixing:convex``: unquoted strings (the zoo alone needs "mc_mixing:'convex'")
     use_tolerant_store_dict()
-    sys.argv[1:] = one_thread_by_default(sys.argv[1:])
+    # As typed: what the command to go on after Ctrl-C repeats
+    typed = sys.argv[1:]
+    sys.argv[1:] = one_thread_by_default(typed)
     flush_denormals_unless_kept(sys.argv[1:])
-    one_line = run_errors_in_one_line((UnknownHyperparameterError, HyperparameterError, CheckpointError), (NonFiniteError,))
-    with one_line, argument_errors_in_one_line(), unknown_env_in_one_line():
-        zoo_train.train()
+    usage_errors = (UnknownHyperparameterError, HyperparameterError, CheckpointError, UnsupportedActionSpaceError)
+    one_line = run_errors_in_one_line(usage_errors, (NonFiniteError,))
+    try:
+        with one_line, argument_errors_in_one_line(), unknown_env_in_one_line():
+            with warnings_in_one_line((DefaultHyperparametersWarning,)):
+                zoo_train.train()
+    except KeyboardInterrupt as interruption:
+        print(interruption_line(typed, interruption), file=sys.stderr)
+        return INTERRUPTED
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

@@ -14,7 +14,10 @@ files the default ``-conf``:
 - any other ``-conf`` (a YAML or Python file, a module): the zoo's behaviour, untouched.
 
 Its experiment manager (:class:`OffOnExperimentManager`) also writes checkpoints and resumes runs from them
-(``--checkpoint-freq``, ``--resume``).
+(``--checkpoint-freq``, ``--resume``), refuses an env whose actions the algorithm cannot take before anything is made
+(:class:`UnsupportedActionSpaceError`), warns when a bundled file has no settings for the env
+(:class:`DefaultHyperparametersWarning`), and raises :class:`RunInterrupted` after the model of a run cut short by
+Ctrl-C is saved.
 """
 
 import contextlib
@@ -33,12 +36,15 @@ import rl_zoo3.exp_manager as zoo_exp_manager
 import rl_zoo3.hyperparams_opt as zoo_hyperparams_opt
 import rl_zoo3.train as zoo_train
 import rl_zoo3.utils as zoo_utils
+import sb3_contrib
 import yaml
+from gymnasium import spaces
 from rl_zoo3.exp_manager import ExperimentManager
 from rl_zoo3.hyperparams_opt import convert_offpolicy_params, sample_dqn_params, sample_qrdqn_params
 from stable_baselines3 import DQN
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import EvalCallback
+from stable_baselines3.common.vec_env import VecEnv
 
 # Registers CartPoleFallPenalty-v1 and MountainCarGoalBonus-v0 (also done by ``import sb3_offon``)
 import sb3_offon.envs  # noqa: F401
@@ -146,6 +152,98 @@ class HyperparameterError(ValueError):
     """A ``ValueError`` the algorithm's constructor raised for the hyperparameters it was given."""
 
 
+class UnsupportedActionSpaceError(ValueError):
+    """An env whose action space the algorithm cannot take (a continuous env for a DQN-family algorithm)."""
+
+
+class DefaultHyperparametersWarning(UserWarning):
+    """A run on settings that were not made for its env: the ``default`` entry of a bundled hyperparameter file."""
+
+
+class RunInterrupted(KeyboardInterrupt):
+    """
+    Ctrl-C during training, raised again once the zoo has saved the model trained so far, so that the command line can
+    say where the run stopped and how to go on, and exit with the status of an interrupted command.
+
+    A ``KeyboardInterrupt``, so that whatever does not know it treats it as the interruption it is.
+
+    :param num_timesteps: the env step the run reached
+    :param budget: the env steps it was to train (``-n`` or the YAML's ``n_timesteps``)
+    :param save_path: the run's log folder, where the zoo saved the model
+    :param checkpoint_dir: where its checkpoints go (None without ``--checkpoint-freq``)
+    :param checkpoint_freq: env steps between checkpoints (0: none)
+    """
+
+    def __init__(
+        self, num_timesteps: int, budget: int, save_path: str, checkpoint_dir: str | None, checkpoint_freq: int
+    ) -> None:
+        super().__init__(f"interrupted at step {num_timesteps} of {budget}")
+        self.num_timesteps = num_timesteps
+        self.budget = budget
+        self.save_path = save_path
+        self.checkpoint_dir = checkpoint_dir
+        self.checkpoint_freq = checkpoint_freq
+
+
+# The algorithm families that take only a Discrete action space (SB3 checks it only when the model is built, with an
+# AssertionError's traceback). The zoo's other algorithms are left to SB3's check
+DISCRETE_ONLY: tuple[type[BaseAlgorithm], ...] = (DQN, sb3_contrib.QRDQN)
+
+
+def check_action_space(algo: str, algo_class: type, env_id: str, action_space: spaces.Space) -> None:
+    """
+    :param algo: the ``--algo`` name
+    :param algo_class: the class it trains
+    :param env_id: the env's id
+    :param action_space: the env's action space, as the algorithm would get it (after the env's wrappers)
+    :raises UnsupportedActionSpaceError: in a line, when ``algo_class`` is of the DQN family (:data:`DISCRETE_ONLY`)
+        and the action space is not ``Discrete``
+    """
+    if not issubclass(algo_class, DISCRETE_ONLY) or isinstance(action_space, spaces.Discrete):
+        return
+    kind = " (continuous)" if isinstance(action_space, spaces.Box) else ""
+    raise UnsupportedActionSpaceError(
+        f"{env_id} has the action space {action_space}{kind}: --algo {algo} ({algo_class.__name__}) needs a Discrete "
+        "action space (a finite set of actions); the zoo's ppo, sac and td3 take continuous ones"
+    )
+
+
+# Where the settings bundled with this package and with the zoo are: a run on the `default` entry of one of those files
+# is warned about (a file of the user's own that falls back to its `default` does so by the user's design)
+ZOO_HYPERPARAMS_DIR = Path(zoo_exp_manager.__file__).resolve().parent / "hyperparams"
+
+
+def default_settings_note(config: str, env_id: str, is_atari: bool, budget: int) -> str | None:
+    """
+    What to tell a user whose env has no entry in a bundled hyperparameter file, so that the zoo trains it with the
+    file's ``default`` entry: settings that were tuned for no task, usually for a budget of a million steps.
+
+    :param config: the hyperparameter file the zoo read
+    :param env_id: the env's id
+    :param is_atari: whether the zoo takes the env for an Atari game (it reads the ``atari`` entry then)
+    :param budget: the env steps the run trains (``-n``, else the entry's ``n_timesteps``)
+    :return: the line to warn with, None when the file has an entry for the env, or is not a bundled one, or the env is
+        an Atari game
+    """
+    path = Path(config).resolve()
+    bundled = [folder for folder in (HYPERPARAMS_DIR, ZOO_HYPERPARAMS_DIR) if path.is_relative_to(folder)]
+    if path.suffix not in (".yml", ".yaml") or not bundled:
+        return None
+    with open(path) as file:
+        entries = yaml.safe_load(file) or {}
+    # The zoo reads an Atari game's settings from the `atari` entry, never from `default`
+    if env_id in entries or is_atari or "default" not in entries:
+        return None
+    # Named from its package (sb3_offon/hyperparams/offon_dqn.yml): the installed path is in the zoo's output above
+    shown = path.relative_to(bundled[0].parent.parent).as_posix()
+    close = difflib.get_close_matches(env_id, [name for name in entries if name not in ("default", "atari")], n=2)
+    hint = f" (closest entries: {', '.join(close)})" if close else ""
+    return (
+        f"{shown} has no settings for {env_id}: training with its 'default' entry (untuned) for {budget:,} steps{hint}. "
+        "Choose the budget with -n, the settings with --hyperparams key:value or -conf FILE"
+    )
+
+
 def raised_by_a_constructor(error: BaseException) -> bool:
     """Whether ``error`` was raised while an algorithm was being built (a frame of ``__init__`` of a ``BaseAlgorithm``)."""
     frame_and_lines = traceback.walk_tb(error.__traceback__)
@@ -237,6 +335,10 @@ class OffOnExperimentManager(ExperimentManager):
         self.resumed_from: Checkpoint | None = None
         # What made the run (--algo, env, hyperparameters), kept in its checkpoints for --resume to compare with
         self.run_config: dict[str, Any] = {}
+        # The warning for a run on a bundled file's `default` entry (default_settings_note), given once the setup is done
+        self.default_settings: str | None = None
+        # The step at which Ctrl-C stopped training (None: it was not)
+        self.interrupted_at: int | None = None
 
     def setup_experiment(self) -> tuple[BaseAlgorithm, dict[str, Any]] | None:
         """
@@ -263,6 +365,10 @@ class OffOnExperimentManager(ExperimentManager):
                 # What the algorithm refused, in the line the command line prints (sb3_offon.train)
                 raise HyperparameterError(f"invalid hyperparameter (--hyperparams or the YAML file): {error}") from error
             raise
+        if self.default_settings is not None:
+            # After the setup, not where the settings are read: the last thing said before training, and not said at
+            # all for a command refused in the setup (an env whose actions the algorithm cannot take)
+            warnings.warn(self.default_settings, DefaultHyperparametersWarning, stacklevel=2)
         if results is None or self.resumed_from is None:
             return results
         model, saved_hyperparams = results
@@ -282,8 +388,10 @@ class OffOnExperimentManager(ExperimentManager):
             "env": self.env_name.gym_id,
             "hyperparams": comparable(dict(saved_hyperparams)),
         }
+        # -n, else the entry's (the zoo applies it later, in _preprocess_hyperparams)
+        budget = self.n_timesteps if self.n_timesteps > 0 else int(hyperparams.get("n_timesteps", 0))
+        self.default_settings = default_settings_note(self.config, self.env_name.gym_id, self._is_atari, budget)
         if self.resumed_from is not None:
-            budget = self.n_timesteps if self.n_timesteps > 0 else int(hyperparams["n_timesteps"])
             self.check_resumed_run(self.resumed_from, budget)
         return hyperparams, saved_hyperparams
 
@@ -321,6 +429,26 @@ class OffOnExperimentManager(ExperimentManager):
                 f"trains {budget} (-n): a resumed run keeps its budget"
             )
 
+    def create_envs(self, n_envs: int, eval_env: bool = False, no_log: bool = False) -> VecEnv:
+        """
+        The zoo's envs (training or evaluation), their action space checked against the algorithm's
+        (:func:`check_action_space`) as soon as the first is made, before the model: SB3 would refuse it there with
+        an assertion's traceback.
+
+        :param n_envs: the number of envs
+        :param eval_env: whether they are for evaluation
+        :param no_log: whether to leave out the monitor files
+        :return: the vectorised envs
+        :raises UnsupportedActionSpaceError: in a line, the envs closed
+        """
+        env = super().create_envs(n_envs, eval_env=eval_env, no_log=no_log)
+        try:
+            check_action_space(self.algo, zoo_utils.ALGOS[self.algo], self.env_name.gym_id, env.action_space)
+        except UnsupportedActionSpaceError:
+            env.close()
+            raise
+        return env
+
     def _eval_callback(self) -> EvalCallback | None:
         """The run's evaluation callback, which the zoo's ``create_callbacks`` adds with ``--eval-freq`` (else None)."""
         return next((callback for callback in self.callbacks if isinstance(callback, EvalCallback)), None)
@@ -351,11 +479,14 @@ class OffOnExperimentManager(ExperimentManager):
                 )
             )
 
-    def _learn_the_rest(self, model: BaseAlgorithm) -> None:
+    def _learn_to_budget(self, model: BaseAlgorithm) -> None:
         """
-        The zoo's ``learn`` (its logging interval, callbacks, Ctrl-C and clean-up) for the steps left to a resumed run.
-        Repeated rather than called: the zoo's calls ``model.learn(n_timesteps)`` without ``reset_num_timesteps``, and
-        a ``learn`` set on the model to add it would be pickled into every checkpoint the model saves.
+        The zoo's ``learn`` (its logging interval, callbacks, Ctrl-C and clean-up), for the budget or, in a resumed run,
+        the steps its budget has left; Ctrl-C is recorded in :attr:`interrupted_at` instead of passed over in silence.
+
+        Repeated rather than called: the zoo's swallows the ``KeyboardInterrupt`` (so that the model trained so far is
+        saved after it) and calls ``model.learn(n_timesteps)`` without ``reset_num_timesteps``, and a ``learn`` set on
+        the model to change either would be pickled into every checkpoint the model saves.
         """
         kwargs: dict[str, Any] = {}
         if self.log_interval > -1:
@@ -364,15 +495,27 @@ class OffOnExperimentManager(ExperimentManager):
             kwargs["log_interval"] = None
         if self.callbacks:
             kwargs["callback"] = self.callbacks
+        if self.algo == "ars" and self.n_envs > 1:
+            # As the zoo: ARS evaluates its candidates in parallel envs
+            kwargs["async_eval"] = zoo_exp_manager.AsyncEval(
+                [lambda: self.create_envs(n_envs=1, no_log=True) for _ in range(self.n_envs)], model.policy
+            )
+        steps = self.n_timesteps
+        if self.resumed_from is not None:
+            steps, kwargs["reset_num_timesteps"] = self.n_timesteps - model.num_timesteps, False
         try:
-            model.learn(self.n_timesteps - model.num_timesteps, reset_num_timesteps=False, **kwargs)
+            model.learn(steps, **kwargs)
         except KeyboardInterrupt:
-            pass  # as the zoo: the model trained so far is saved
+            # The model trained so far is saved, as the zoo does; save_trained_model then raises RunInterrupted
+            self.interrupted_at = int(model.num_timesteps)
         finally:
             if self.callbacks:
-                self.callbacks[0].on_training_end()
-            assert model.env is not None
-            model.env.close()
+                self.callbacks[0].on_training_end()  # the zoo's: closes the progress bar
+            try:
+                assert model.env is not None
+                model.env.close()
+            except EOFError:
+                pass
 
     def learn(self, model: BaseAlgorithm) -> None:
         """
@@ -381,12 +524,11 @@ class OffOnExperimentManager(ExperimentManager):
         budget removes its checkpoints: they are for runs that did not. So does a run that a callback of its own ended
         on purpose (one whose ``stopped_at`` is set, :class:`sb3_offon.callbacks.StopOnMeanTrainingReward`): it is
         finished, and says so in ``stopped.json`` in its log folder (the step and the callback), which tells it from a
-        run cut short by Ctrl-C.
+        run cut short by Ctrl-C. A run cut short keeps its checkpoints; the zoo saves its model, then
+        :meth:`save_trained_model` raises :class:`RunInterrupted`.
         """
-        if self.resumed_from is None:
-            super().learn(model)
-        else:
-            self._learn_the_rest(model)
+        self._learn_to_budget(model)
+        if self.resumed_from is not None:
             for name, text in self.resumed_from.monitor_texts.items():
                 current = Path(self.save_path) / name
                 current.write_text(joined_monitor(text, current.read_text() if current.is_file() else ""))
@@ -396,6 +538,25 @@ class OffOnExperimentManager(ExperimentManager):
             (Path(self.save_path) / STOPPED_FILE).write_text(json.dumps(record, indent=2) + "\n")
         if self.checkpoint_freq > 0 and (model.num_timesteps >= self.n_timesteps or stopped_by):
             shutil.rmtree(self.checkpoint_dir, ignore_errors=True)
+
+    def save_trained_model(self, model: BaseAlgorithm) -> None:
+        """
+        The zoo's (the model, its replay buffer with ``--save-replay-buffer``, the env's normalisation); for a run that
+        Ctrl-C cut short, then :class:`RunInterrupted`: the zoo's ``train()`` calls this last, so the interruption
+        reaches the command line once everything the zoo saves is saved.
+
+        :param model: the trained model
+        :raises RunInterrupted: when training was interrupted
+        """
+        super().save_trained_model(model)
+        if self.interrupted_at is not None:
+            raise RunInterrupted(
+                self.interrupted_at,
+                self.n_timesteps,
+                self.save_path,
+                self.checkpoint_dir if self.checkpoint_freq > 0 else None,
+                self.checkpoint_freq,
+            )
 
 
 def _sample_mc_params(trial: optuna.Trial, lambda_returns: bool = False) -> dict[str, Any]:

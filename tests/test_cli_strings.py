@@ -20,6 +20,7 @@ from torch import nn
 from sb3_offon import OffOnDQN
 from sb3_offon.cli_args import STRING_OPTIONS, TolerantStoreDict, use_tolerant_store_dict
 from sb3_offon.train import main as train_main
+from sb3_offon.zoo import OffOnExperimentManager
 
 
 def parse(*pairs: str, action: type[argparse.Action] = TolerantStoreDict) -> dict[str, Any]:
@@ -111,7 +112,8 @@ def test_command_line_reaches_the_model(tmp_path: Path, monkeypatch: pytest.Monk
     for module in (zoo_train, zoo_enjoy):
         monkeypatch.setattr(module, "StoreDict", module.StoreDict)
     models = []
-    monkeypatch.setattr(ExperimentManager, "learn", lambda self, model: models.append(model))
+    # The command line's manager trains in a learn of its own (sb3_offon.zoo.OffOnExperimentManager)
+    monkeypatch.setattr(OffOnExperimentManager, "learn", lambda self, model: models.append(model))
     monkeypatch.setattr(ExperimentManager, "save_trained_model", lambda self, model: None)
     monkeypatch.chdir(tmp_path)
     command = ["sb3_offon.train", "--algo", "offon_dqn", "--env", "CartPole-v1", "-n", "100", "-f", "logs"]
