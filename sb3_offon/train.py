@@ -324,13 +324,13 @@ def interruption_line(argv: list[str], interruption: KeyboardInterrupt) -> str:
     on disk with the command that goes on from it, or that there is none to resume from.
 
     :param argv: the command's arguments, as typed (without the program name)
-    :param interruption: the interruption; a :class:`sb3_offon.zoo.RunInterrupted` (training was stopped, and the zoo
+    :param interruption: the interruption; a :class:`sb3_offon.zoo_checks.RunInterrupted` (training was stopped, and the zoo
         saved the model) says where the run's checkpoints are, another one (before or after training) is looked up in
         ``--checkpoint-dir`` or ``--resume``
     :return: the line, without its newline
     """
     from sb3_offon.resume import checkpoint_folders, checkpoint_problem
-    from sb3_offon.zoo import RunInterrupted, checkpoint_folder
+    from sb3_offon.zoo_checks import RunInterrupted, checkpoint_folder
 
     if isinstance(interruption, RunInterrupted):
         folder = interruption.checkpoint_dir
@@ -397,14 +397,12 @@ def main() -> int:
         from sb3_offon.cli_args import use_tolerant_store_dict
         from sb3_offon.common.non_finite import NonFiniteError
         from sb3_offon.resume import CheckpointError
-        from sb3_offon.zoo import (
-            ALGO_SUMMARIES,
-            ALGOS,
+        from sb3_offon.zoo import ALGO_SUMMARIES, ALGOS, register
+        from sb3_offon.zoo_checks import (
             DefaultHyperparametersWarning,
             HyperparameterError,
             UnknownHyperparameterError,
             UnsupportedActionSpaceError,
-            register,
         )
     register()
     describe_help(zoo_train, ALGOS, ALGO_SUMMARIES)

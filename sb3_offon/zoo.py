@@ -15,32 +15,28 @@ files the default ``-conf``:
 
 Its experiment manager (:class:`OffOnExperimentManager`) also writes checkpoints and resumes runs from them
 (``--checkpoint-freq``, ``--resume``), refuses an env whose actions the algorithm cannot take before anything is made
-(:class:`UnsupportedActionSpaceError`), warns when a bundled file has no settings for the env
-(:class:`DefaultHyperparametersWarning`), and raises :class:`RunInterrupted` after the model of a run cut short by
-Ctrl-C is saved.
+(:class:`sb3_offon.zoo_checks.UnsupportedActionSpaceError`), warns when a bundled file has no settings for the env
+(:class:`sb3_offon.zoo_checks.DefaultHyperparametersWarning`), and raises :class:`sb3_offon.zoo_checks.RunInterrupted`
+after the model of a run cut short by Ctrl-C is saved. The checks are in :mod:`sb3_offon.zoo_checks`, the Optuna
+samplers in :mod:`sb3_offon.tuning`.
 """
 
 import contextlib
-import difflib
 import inspect
 import json
 import shutil
-import traceback
 import warnings
 from pathlib import Path
 from typing import Any
 
-import optuna
 import rl_zoo3.enjoy as zoo_enjoy
 import rl_zoo3.exp_manager as zoo_exp_manager
 import rl_zoo3.hyperparams_opt as zoo_hyperparams_opt
 import rl_zoo3.train as zoo_train
 import rl_zoo3.utils as zoo_utils
-import sb3_contrib
 import yaml
-from gymnasium import spaces
 from rl_zoo3.exp_manager import ExperimentManager
-from rl_zoo3.hyperparams_opt import convert_offpolicy_params, sample_dqn_params, sample_qrdqn_params
+from rl_zoo3.hyperparams_opt import convert_offpolicy_params
 from stable_baselines3 import DQN
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import EvalCallback
@@ -49,10 +45,8 @@ from stable_baselines3.common.vec_env import VecEnv
 # Registers CartPoleFallPenalty-v1 and MountainCarGoalBonus-v0 (also done by ``import sb3_offon``)
 import sb3_offon.envs  # noqa: F401
 from sb3_offon.common.non_finite import NonFiniteCheck, NonFiniteChecksMixin
-from sb3_offon.common.offon_model import MC_TRUNCATION_OPTIONS
 from sb3_offon.common.prioritized_buffers import PRIORITIZED_BUFFERS
 from sb3_offon.offon_dqn import OffOnDQN
-from sb3_offon.offon_dqn.offon_dqn import LOSS_FUNCTIONS, MC_MIXING_OPTIONS, SARSA_TARGET_OPTIONS
 from sb3_offon.offon_qrdqn import OffOnQRDQN
 from sb3_offon.qrdqn import QRDQN
 from sb3_offon.resume import (
@@ -60,14 +54,25 @@ from sb3_offon.resume import (
     Checkpoint,
     CheckpointError,
     RunCheckpoint,
-    checkpoint_folders,
     joined_monitor,
     n_step_reload_unflagged,
 )
 from sb3_offon.torch_layers import MinAtarCNN
+from sb3_offon.tuning import SAMPLERS as SAMPLERS_BY_NAME
 from sb3_offon.variants import DQNMC, DQNSarsa
-
-HYPERPARAMS_DIR = Path(__file__).resolve().parent / "hyperparams"
+from sb3_offon.zoo_checks import (
+    HYPERPARAMS_DIR,
+    DefaultHyperparametersWarning,
+    HyperparameterError,
+    RunInterrupted,
+    UnsupportedActionSpaceError,
+    check_action_space,
+    check_hyperparameter_names,
+    checkpoint_folder,
+    comparable,
+    default_settings_note,
+    raised_by_a_constructor,
+)
 
 # The names are the contract of the command line and of the log folders (logs/{algo}/...). ``dqn_nstep`` is SB3's own
 # DQN under a name of its own, so that its settings (the zoo's DQN entries plus ``n_steps``) and its logs are apart
@@ -94,6 +99,11 @@ ALGOS: dict[str, type[BaseAlgorithm]] = {
 with open(HYPERPARAMS_DIR / "aliases.yml") as aliases_file:
     ALIASES: dict[str, str] = yaml.safe_load(aliases_file)
 ALGOS.update({alias: ALGOS[name] for alias, name in ALIASES.items()})
+# The Optuna samplers (sb3_offon/tuning.py), under the former names too
+SAMPLERS = {
+    **SAMPLERS_BY_NAME,
+    **{alias: SAMPLERS_BY_NAME[name] for alias, name in ALIASES.items() if name in SAMPLERS_BY_NAME},
+}
 
 # What each name trains, in a line (``--help`` lists them)
 ALGO_SUMMARIES: dict[str, str] = {
@@ -133,175 +143,6 @@ def resolve_config(algo: str, config: str | None) -> str | None:
             raise FileNotFoundError(f"The bundled hyperparameter set '{config}' has no file for {algo}: {available}")
         return str(bundled)
     return config
-
-
-# Keys of a YAML entry (or --hyperparams) that the zoo itself reads, the rest being the algorithm's keyword arguments
-ZOO_KEYS = frozenset(
-    {
-        "n_timesteps", "n_envs", "normalize", "policy", "env_wrapper", "vec_env_wrapper", "frame_stack", "callback",
-        "monitor_kwargs", "env_kwargs", "noise_type", "noise_std",
-    }
-)  # fmt: skip
-
-
-class UnknownHyperparameterError(ValueError):
-    """A hyperparameter (YAML entry or ``--hyperparams``) that is neither the zoo's nor an argument of the algorithm."""
-
-
-class HyperparameterError(ValueError):
-    """A ``ValueError`` the algorithm's constructor raised for the hyperparameters it was given."""
-
-
-class UnsupportedActionSpaceError(ValueError):
-    """An env whose action space the algorithm cannot take (a continuous env for a DQN-family algorithm)."""
-
-
-class DefaultHyperparametersWarning(UserWarning):
-    """A run on settings that were not made for its env: the ``default`` entry of a bundled hyperparameter file."""
-
-
-class RunInterrupted(KeyboardInterrupt):
-    """
-    Ctrl-C during training, raised again once the zoo has saved the model trained so far, so that the command line can
-    say where the run stopped and how to go on, and exit with the status of an interrupted command.
-
-    A ``KeyboardInterrupt``, so that whatever does not know it treats it as the interruption it is.
-
-    :param num_timesteps: the env step the run reached
-    :param budget: the env steps it was to train (``-n`` or the YAML's ``n_timesteps``)
-    :param save_path: the run's log folder, where the zoo saved the model
-    :param checkpoint_dir: where its checkpoints go (None without ``--checkpoint-freq``)
-    :param checkpoint_freq: env steps between checkpoints (0: none)
-    """
-
-    def __init__(
-        self, num_timesteps: int, budget: int, save_path: str, checkpoint_dir: str | None, checkpoint_freq: int
-    ) -> None:
-        super().__init__(f"interrupted at step {num_timesteps} of {budget}")
-        self.num_timesteps = num_timesteps
-        self.budget = budget
-        self.save_path = save_path
-        self.checkpoint_dir = checkpoint_dir
-        self.checkpoint_freq = checkpoint_freq
-
-
-# The algorithm families that take only a Discrete action space (SB3 checks it only when the model is built, with an
-# AssertionError's traceback). The zoo's other algorithms are left to SB3's check
-DISCRETE_ONLY: tuple[type[BaseAlgorithm], ...] = (DQN, sb3_contrib.QRDQN)
-
-
-def check_action_space(algo: str, algo_class: type, env_id: str, action_space: spaces.Space) -> None:
-    """
-    :param algo: the ``--algo`` name
-    :param algo_class: the class it trains
-    :param env_id: the env's id
-    :param action_space: the env's action space, as the algorithm would get it (after the env's wrappers)
-    :raises UnsupportedActionSpaceError: in a line, when ``algo_class`` is of the DQN family (:data:`DISCRETE_ONLY`)
-        and the action space is not ``Discrete``
-    """
-    if not issubclass(algo_class, DISCRETE_ONLY) or isinstance(action_space, spaces.Discrete):
-        return
-    kind = " (continuous)" if isinstance(action_space, spaces.Box) else ""
-    raise UnsupportedActionSpaceError(
-        f"{env_id} has the action space {action_space}{kind}: --algo {algo} ({algo_class.__name__}) needs a Discrete "
-        "action space (a finite set of actions); the zoo's ppo, sac and td3 take continuous ones"
-    )
-
-
-# Where the settings bundled with this package and with the zoo are: a run on the `default` entry of one of those files
-# is warned about (a file of the user's own that falls back to its `default` does so by the user's design)
-ZOO_HYPERPARAMS_DIR = Path(zoo_exp_manager.__file__).resolve().parent / "hyperparams"
-
-
-def default_settings_note(config: str, env_id: str, is_atari: bool, budget: int) -> str | None:
-    """
-    What to tell a user whose env has no entry in a bundled hyperparameter file, so that the zoo trains it with the
-    file's ``default`` entry: settings that were tuned for no task, usually for a budget of a million steps.
-
-    :param config: the hyperparameter file the zoo read
-    :param env_id: the env's id
-    :param is_atari: whether the zoo takes the env for an Atari game (it reads the ``atari`` entry then)
-    :param budget: the env steps the run trains (``-n``, else the entry's ``n_timesteps``)
-    :return: the line to warn with, None when the file has an entry for the env, or is not a bundled one, or the env is
-        an Atari game
-    """
-    path = Path(config).resolve()
-    bundled = [folder for folder in (HYPERPARAMS_DIR, ZOO_HYPERPARAMS_DIR) if path.is_relative_to(folder)]
-    if path.suffix not in (".yml", ".yaml") or not bundled:
-        return None
-    with open(path) as file:
-        entries = yaml.safe_load(file) or {}
-    # The zoo reads an Atari game's settings from the `atari` entry, never from `default`
-    if env_id in entries or is_atari or "default" not in entries:
-        return None
-    # Named from its package (sb3_offon/hyperparams/offon_dqn.yml): the installed path is in the zoo's output above
-    shown = path.relative_to(bundled[0].parent.parent).as_posix()
-    close = difflib.get_close_matches(env_id, [name for name in entries if name not in ("default", "atari")], n=2)
-    hint = f" (closest entries: {', '.join(close)})" if close else ""
-    return (
-        f"{shown} has no settings for {env_id}: training with its 'default' entry (untuned) for {budget:,} steps{hint}. "
-        "Choose the budget with -n, the settings with --hyperparams key:value or -conf FILE"
-    )
-
-
-def raised_by_a_constructor(error: BaseException) -> bool:
-    """Whether ``error`` was raised while an algorithm was being built (a frame of ``__init__`` of a ``BaseAlgorithm``)."""
-    frame_and_lines = traceback.walk_tb(error.__traceback__)
-    return any(
-        frame.f_code.co_name == "__init__" and isinstance(frame.f_locals.get("self"), BaseAlgorithm)
-        for frame, _ in frame_and_lines
-    )
-
-
-def constructor_arguments(algo_class: type) -> set[str] | None:
-    """
-    The keyword arguments ``algo_class(...)`` takes: its ``__init__``'s, and its bases' as far as each passes
-    ``**kwargs`` on (None when every ``__init__`` up to ``object`` takes ``**kwargs``: anything may be valid).
-    """
-    names: set[str] = set()
-    for klass in algo_class.__mro__:
-        init = klass.__dict__.get("__init__")
-        if init is None or klass is object:
-            continue
-        parameters = inspect.signature(init).parameters.values()
-        names |= {p.name for p in parameters if p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD)}
-        if not any(p.kind == p.VAR_KEYWORD for p in parameters):
-            return names - {"self"}
-    return None
-
-
-def check_hyperparameter_names(algo: str, algo_class: type, hyperparams: dict[str, Any]) -> None:
-    """
-    :raises UnknownHyperparameterError: naming the first key of ``hyperparams`` that is neither one of :data:`ZOO_KEYS`
-        nor an argument of ``algo_class``, with the close matches
-    """
-    arguments = constructor_arguments(algo_class)
-    if arguments is None:
-        return
-    known = arguments | ZOO_KEYS
-    for key in hyperparams:
-        if key not in known:
-            close = difflib.get_close_matches(key, sorted(known), n=3, cutoff=0.6)
-            hint = f"close matches: {', '.join(close)}" if close else "no argument is close to it"
-            raise UnknownHyperparameterError(
-                f"unknown hyperparameter '{key}' for --algo {algo} ({algo_class.__name__}); {hint}"
-            )
-
-
-def comparable(value: Any) -> Any:
-    """``value`` as JSON would give it back (tuples as lists, objects by their ``repr``): what checkpoints record."""
-    return json.loads(json.dumps(value, default=repr, sort_keys=True))
-
-
-def checkpoint_folder(resume: str | None) -> str | None:
-    """
-    The checkpoint folder ``--resume`` names: the folder itself, or, given the log folder of the interrupted run (the
-    zoo's ``logs/{algo}/{env}_{n}``), its ``checkpoint/`` sub-folder, where ``--checkpoint-freq`` writes by default.
-    """
-    if resume is None or checkpoint_folders(resume):
-        return resume
-    inside = Path(resume) / "checkpoint"
-    return str(inside) if checkpoint_folders(inside) else resume
 
 
 class OffOnExperimentManager(ExperimentManager):
@@ -557,178 +398,6 @@ class OffOnExperimentManager(ExperimentManager):
                 self.checkpoint_dir if self.checkpoint_freq > 0 else None,
                 self.checkpoint_freq,
             )
-
-
-def _sample_mc_params(trial: optuna.Trial, lambda_returns: bool = False) -> dict[str, Any]:
-    """
-    delta1, the probability of the Monte-Carlo target, as a decaying schedule (the paper's shape), and the MC options.
-    With ``lambda_returns``, delta1 is lambda and ``mc_mixing`` stays ``"lambda"`` (the YAML's); otherwise it is one of
-    the coin-flip modes (the search space of the paper's variants, as it was before the lambda mode existed).
-    """
-    sampled: dict[str, Any] = {
-        "mc_initial_prob": trial.suggest_float("mc_initial_prob", 0.5, 1.0),
-        "mc_final_prob": trial.suggest_float("mc_final_prob", 0.0, 0.5),
-        "mc_fraction": trial.suggest_float("mc_fraction", 0.1, 1.0),
-        "mc_truncation": trial.suggest_categorical("mc_truncation", list(MC_TRUNCATION_OPTIONS)),
-    }
-    if not lambda_returns:
-        coin_flips = [mode for mode in MC_MIXING_OPTIONS if mode != "lambda"]
-        sampled["mc_mixing"] = trial.suggest_categorical("mc_mixing", coin_flips)
-    return sampled
-
-
-def _sample_qlearning_params(trial: optuna.Trial, sarsa_target: bool = True) -> dict[str, Any]:
-    """
-    delta2, the probability of Q-learning given a TD target, as a decaying schedule, and the Sarsa option (not with
-    lambda-returns, where delta2 weighs the trace after a non-greedy action and no Sarsa target is made).
-    """
-    sampled: dict[str, Any] = {
-        "qlearning_initial_prob": trial.suggest_float("qlearning_initial_prob", 0.5, 1.0),
-        "qlearning_final_prob": trial.suggest_float("qlearning_final_prob", 0.0, 0.5),
-        "qlearning_fraction": trial.suggest_float("qlearning_fraction", 0.1, 1.0),
-    }
-    if sarsa_target:
-        sampled["sarsa_target"] = trial.suggest_categorical("sarsa_target", list(SARSA_TARGET_OPTIONS))
-    return sampled
-
-
-def _sample_offon_params(
-    trial: optuna.Trial,
-    n_actions: int,
-    n_envs: int,
-    additional_args: dict,
-    mc: bool,
-    sarsa: bool,
-    lambda_returns: bool = False,
-) -> dict[str, Any]:
-    # DQN's own parameters exactly as the zoo samples them for ``dqn``, so that tuning budgets compare
-    hyperparams = sample_dqn_params(trial, n_actions, n_envs, additional_args)
-    # Parameters a variant fixes are not sampled: they would only dilute the search
-    if mc:
-        hyperparams.update(_sample_mc_params(trial, lambda_returns))
-    if sarsa:
-        hyperparams.update(_sample_qlearning_params(trial, sarsa_target=not lambda_returns))
-    hyperparams["loss"] = trial.suggest_categorical("loss", list(LOSS_FUNCTIONS))
-    return hyperparams
-
-
-def sample_offon_paper_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
-    """
-    Sampler for the paper's coin-flip targets (``offon_paper``): the zoo's DQN parameters, the delta1 and delta2
-    schedules, the string options.
-
-    The schedules are sampled as decaying ones (initial in [0.5, 1], final in [0, 0.5]), the paper's shape.
-
-    :param trial: the Optuna trial
-    :param n_actions: number of actions (unused by DQN, part of the zoo's sampler signature)
-    :param n_envs: number of training envs
-    :param additional_args: the zoo's extra arguments (``using_her_replay_buffer``, ``her_kwargs``)
-    :return: the keyword arguments of the algorithm
-    """
-    return _sample_offon_params(trial, n_actions, n_envs, additional_args, mc=True, sarsa=True)
-
-
-def sample_dqn_mc_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
-    """
-    Sampler for DQNMC hyperparams: as :func:`sample_offon_paper_params`, with delta2 left at 1 (no Sarsa).
-
-    :param trial: the Optuna trial
-    :param n_actions: number of actions (unused by DQN, part of the zoo's sampler signature)
-    :param n_envs: number of training envs
-    :param additional_args: the zoo's extra arguments (``using_her_replay_buffer``, ``her_kwargs``)
-    :return: the keyword arguments of the algorithm
-    """
-    return _sample_offon_params(trial, n_actions, n_envs, additional_args, mc=True, sarsa=False)
-
-
-def sample_dqn_sarsa_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
-    """
-    Sampler for DQNSarsa hyperparams: as :func:`sample_offon_paper_params`, with delta1 left at 0 (no Monte-Carlo).
-
-    :param trial: the Optuna trial
-    :param n_actions: number of actions (unused by DQN, part of the zoo's sampler signature)
-    :param n_envs: number of training envs
-    :param additional_args: the zoo's extra arguments (``using_her_replay_buffer``, ``her_kwargs``)
-    :return: the keyword arguments of the algorithm
-    """
-    return _sample_offon_params(trial, n_actions, n_envs, additional_args, mc=False, sarsa=True)
-
-
-def sample_offon_lambda_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
-    """
-    Sampler for OffOnDQN with ``mc_mixing="lambda"`` (``offon_dqn``, ``offon_watkins``): the zoo's DQN parameters and
-    the lambda (delta1) and delta2 schedules, sampled as for :func:`sample_offon_paper_params`; ``mc_mixing`` stays the
-    YAML's.
-
-    :param trial: the Optuna trial
-    :param n_actions: number of actions (unused by DQN, part of the zoo's sampler signature)
-    :param n_envs: number of training envs
-    :param additional_args: the zoo's extra arguments (``using_her_replay_buffer``, ``her_kwargs``)
-    :return: the keyword arguments of the algorithm
-    """
-    return _sample_offon_params(trial, n_actions, n_envs, additional_args, mc=True, sarsa=True, lambda_returns=True)
-
-
-def sample_dqn_nstep_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
-    """
-    Sampler for n-step DQN: the zoo's DQN parameters and ``n_steps`` among 3, 5 and 10.
-
-    :param trial: the Optuna trial
-    :param n_actions: number of actions (unused by DQN, part of the zoo's sampler signature)
-    :param n_envs: number of training envs
-    :param additional_args: the zoo's extra arguments (``using_her_replay_buffer``, ``her_kwargs``)
-    :return: the keyword arguments of the algorithm
-    """
-    hyperparams = sample_dqn_params(trial, n_actions, n_envs, additional_args)
-    hyperparams["n_steps"] = trial.suggest_categorical("n_steps", [3, 5, 10])
-    return hyperparams
-
-
-def sample_qrdqn_nstep_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
-    """
-    Sampler for n-step QR-DQN: the zoo's QR-DQN parameters and ``n_steps`` among 3, 5 and 10.
-
-    :param trial: the Optuna trial
-    :param n_actions: number of actions (part of the zoo's sampler signature)
-    :param n_envs: number of training envs
-    :param additional_args: the zoo's extra arguments (``using_her_replay_buffer``, ``her_kwargs``)
-    :return: the keyword arguments of the algorithm
-    """
-    hyperparams = sample_qrdqn_params(trial, n_actions, n_envs, additional_args)
-    hyperparams["n_steps"] = trial.suggest_categorical("n_steps", [3, 5, 10])
-    return hyperparams
-
-
-def sample_offon_qrdqn_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
-    """
-    Sampler for OffOnQRDQN: the zoo's QR-DQN parameters (``n_quantiles`` among them) and the lambda (delta1) and delta2
-    schedules, sampled as for OffOnDQN's lambda-returns (:func:`sample_offon_lambda_params`).
-
-    :param trial: the Optuna trial
-    :param n_actions: number of actions (part of the zoo's sampler signature)
-    :param n_envs: number of training envs
-    :param additional_args: the zoo's extra arguments (``using_her_replay_buffer``, ``her_kwargs``)
-    :return: the keyword arguments of the algorithm
-    """
-    hyperparams = sample_qrdqn_params(trial, n_actions, n_envs, additional_args)
-    hyperparams.update(_sample_mc_params(trial, lambda_returns=True))
-    hyperparams.update(_sample_qlearning_params(trial, sarsa_target=False))
-    return hyperparams
-
-
-SAMPLERS = {
-    "dqn_nstep": sample_dqn_nstep_params,
-    "offon_paper": sample_offon_paper_params,
-    "dqn_mc": sample_dqn_mc_params,
-    "dqn_sarsa": sample_dqn_sarsa_params,
-    # The search's first choice fixes delta2 at 1 (no Sarsa), as DQNMC does: the same parameters are worth sampling
-    "offon_mc_decay": sample_dqn_mc_params,
-    "offon_watkins": sample_offon_lambda_params,
-    "offon_dqn": sample_offon_lambda_params,
-    "qrdqn_nstep": sample_qrdqn_nstep_params,
-    "offon_qrdqn": sample_offon_qrdqn_params,
-}
-SAMPLERS.update({alias: SAMPLERS[name] for alias, name in ALIASES.items()})
 
 
 def register() -> None:

@@ -24,11 +24,10 @@ from stable_baselines3 import DQN, PPO
 from sb3_offon import OffOnDQN, OffOnQRDQN
 from sb3_offon.resume import Checkpoint
 from sb3_offon.train import INTERRUPTED, interruption_line, main, resume_command
-from sb3_offon.zoo import (
-    ALGOS,
+from sb3_offon.zoo import ALGOS, OffOnExperimentManager
+from sb3_offon.zoo_checks import (
     HYPERPARAMS_DIR,
     ZOO_HYPERPARAMS_DIR,
-    OffOnExperimentManager,
     UnsupportedActionSpaceError,
     check_action_space,
     default_settings_note,
