@@ -16,7 +16,7 @@ BAD = [
     ("n_steps", 0),
     ("train_freq", 0),
     ("train_freq", (0, "step")),
-    ("train_freq", (1.5, "episode")),
+    ("train_freq", (0, "episode")),  # SB3 checks the type and unit only
     ("gradient_steps", -2),
     ("gradient_steps", 1.0),
     ("target_update_interval", 0),

@@ -41,10 +41,11 @@ def test_horizons_follow_the_lambda_weights():
 
 def reference(
     steps: list[dict], t: int, horizon: int, cut_is_terminal: bool, truncation_is_terminal: bool = False
-) -> tuple[float, float, float]:
+) -> tuple[float, float, float, int]:
     """From the log alone: the horizon's discounted rewards (fewer where the episode or the log ends), the discount of
-    the value after it (0 where none follows) and the state it bootstraps from. ``truncation_is_terminal``: a buffer
-    with ``optimize_memory_usage`` stores a time-limit truncation as a termination (as SB3 does)."""
+    the value after it (0 where none follows), the state it bootstraps from and the steps it spans.
+    ``truncation_is_terminal``: a buffer with ``optimize_memory_usage`` stores a time-limit truncation as a termination
+    (as SB3 does)."""
     rewards, k = 0.0, 0
     while True:
         rewards += GAMMA**k * steps[t + k]["reward"]
@@ -54,7 +55,7 @@ def reference(
     last = steps[t + k - 1]
     terminal = ("terminated", "truncated") if truncation_is_terminal else ("terminated",)
     no_value = last["end"] in terminal or (cut_is_terminal and last["end"] is not None)
-    return rewards, 0.0 if no_value else GAMMA**k, float(last["next"])
+    return rewards, 0.0 if no_value else GAMMA**k, float(last["next"]), k
 
 
 @pytest.mark.parametrize("seed", range(3))
@@ -77,12 +78,17 @@ def test_drawn_horizons_match_the_trajectory_log(
     # With optimize_memory_usage a cut's next observation is overwritten by the next episode's first (as in SB3): no cuts
     log = play(buffer, n_adds, cuts=not optimize_memory_usage, seed=seed)
     np.random.seed(seed)
-    samples = sample_horizon_returns(buffer, 200, lam, longest, GAMMA, cut_is_terminal, np.random.default_rng(seed))
+    samples = sample_horizon_returns(buffer, 200, 40, lam, longest, GAMMA, cut_is_terminal, np.random.default_rng(seed))
+    # The horizons drawn, from a generator in the same state: whole windows, at most the longest
     window_count = max(longest // n_steps, 1)
-    assert np.all(samples.horizons >= 1) and np.all(samples.horizons <= window_count * n_steps)
+    drawn = draw_horizons(np.random.default_rng(seed), lam, 200, window_count) * n_steps
+    if lam == 0.0:
+        assert np.all(drawn == n_steps)
+    elif lam == 1.0:
+        assert np.all(drawn == window_count * n_steps)
     held = size - (1 if optimize_memory_usage and buffer.full else 0)
     first = n_adds - min(n_adds, held)
-    for slot, env, added_at, rewards, discount, next_obs, horizon in zip(
+    for slot, env, added_at, rewards, discount, next_obs, horizon, wanted in zip(
         samples.slots,
         samples.envs,
         samples.added_at,
@@ -90,21 +96,38 @@ def test_drawn_horizons_match_the_trajectory_log(
         samples.discounts,
         samples.next_observations,
         samples.horizons,
+        drawn,
         strict=True,
     ):
         t = int(added_at)
         assert first <= t < n_adds and t % size == slot
-        # The drawn horizon in whole windows, shortened only where the episode or the log ended
-        expected = reference(log[env], t, int(horizon), cut_is_terminal, optimize_memory_usage)
-        expected_rewards, expected_discount, expected_next = expected
+        # The drawn horizon, shortened only where the episode or the log ended: its return, discount and state
+        expected_rewards, expected_discount, expected_next, steps = reference(
+            log[env], t, int(wanted), cut_is_terminal, optimize_memory_usage
+        )
+        assert horizon == steps
         assert rewards == pytest.approx(expected_rewards, rel=1e-5, abs=1e-5)
         assert discount == pytest.approx(expected_discount, rel=1e-9)
         if expected_discount > 0:  # where no value follows, the state is not read (SB3 stores none with optimize_memory_usage)
             assert float(next_obs[0]) == expected_next
-        if lam in (0.0, 1.0):  # no draw: one window, or the longest horizon (each shortened where the episode stops)
-            fixed = n_steps if lam == 0.0 else window_count * n_steps
-            fixed_expected = reference(log[env], t, fixed, cut_is_terminal, optimize_memory_usage)
-            assert (rewards, discount) == pytest.approx(fixed_expected[:2], rel=1e-5)
+
+
+@pytest.mark.parametrize("n_envs", [1, 3])
+def test_drawn_as_sb3_draws_its_minibatches(n_envs):
+    """The transitions are those that calls of SB3's ``sample()`` would draw, one minibatch after the other (slots, then
+    env indices), and the global RNG ends where SB3's sampling leaves it."""
+    buffer = make_buffer(n_envs, 16, 1, optimize_memory_usage=False)
+    play(buffer, 40, cuts=False, seed=0)
+    np.random.seed(7)
+    samples = sample_horizon_returns(buffer, 4 * 8, 8, 0.5, 100, GAMMA, False, np.random.default_rng(0))
+    after_ours = np.random.get_state(legacy=False)
+    np.random.seed(7)
+    theirs = buffer.sample_minibatches(4, 8).samples  # the same draws as four calls of sample(8)
+    observations, actions = buffer.observations_and_actions(samples.slots, samples.envs)
+    np.testing.assert_array_equal(observations, theirs.observations.numpy())
+    np.testing.assert_array_equal(actions, theirs.actions.numpy())
+    ends = np.random.get_state(legacy=False)["state"]
+    assert all(np.array_equal(ends[key], after_ours["state"][key]) for key in ("key", "pos"))
 
 
 def test_without_the_cache_lambda_zero_is_n_step_qrdqns_target(monkeypatch):
@@ -136,6 +159,17 @@ def test_what_the_cache_free_form_cannot_do_is_refused_by_name(options, message)
         OffOnQRDQN("MlpPolicy", "CartPole-v1", lambda_cache=False, **options, **SMALL)
     with pytest.raises(ValueError, match="`lambda_cache`"):
         OffOnQRDQN("MlpPolicy", "CartPole-v1", lambda_cache="no", **SMALL)
+
+
+def test_a_prioritised_buffer_loaded_later_is_refused_without_the_cache(tmp_path):
+    """The prioritised draw is the cache's: a prioritised buffer loaded into a model without the cache would bring the
+    cache back in silence."""
+    prioritised = OffOnQRDQN("MlpPolicy", "CartPole-v1", replay_buffer_class=PrioritizedOffOnReplayBuffer, **SMALL)
+    prioritised.learn(100)
+    prioritised.save_replay_buffer(tmp_path / "buffer")
+    model = OffOnQRDQN("MlpPolicy", "CartPole-v1", lambda_cache=False, **SMALL)
+    with pytest.raises(ValueError, match="prioritised replay needs the cache"):
+        model.load_replay_buffer(tmp_path / "buffer")
 
 
 @pytest.mark.parametrize("options", [{}, {"double_q": True}, {"n_steps": 3}])

@@ -14,7 +14,8 @@ horizon k drawn from the lambda-return's weights, (1 - lam) lam^(k-1) for k < K 
 K; its target is the k-step return r_t + ... + gamma^(k-1) r_(t+k-1) + gamma^k Z(s_(t+k), a*), computed with the
 target network of the moment. An episode that ends before k steps gives its remaining weight to its end: the
 Monte-Carlo return after a termination, the bootstrap from its last state after a cut (a time limit, a reset, the newest
-transition of a running episode), as in the cached lambda-returns. The quantile loss being linear in the target law,
+transition of a running episode), as in the cached lambda-returns (with ``optimize_memory_usage`` a time limit is
+stored as a termination, as SB3 stores it). The quantile loss being linear in the target law,
 the draw is an unbiased sample of the loss towards the mixture, the argument of the cached ``lambda_form="sampled"``;
 here a transition gets a fresh draw each time it is sampled instead of one per refresh. Peng's Q(lambda) only: the
 trace is never cut (a cut would need the greedy action at every state on the way). With n-step windows (``n_steps`` =
@@ -33,6 +34,9 @@ def lambda_for_horizon(n: float, gamma: float) -> float:
     """
     The lambda whose lambda-return contracts like an ``n``-step return with discount ``gamma`` (see the module's
     docstring): ``OffOnQRDQN(..., mc_initial_prob=lam, mc_final_prob=lam)`` with ``lam = lambda_for_horizon(3, 0.99)``.
+
+    With n-step windows (``n_steps`` = m > 1) lambda weighs windows, not steps: the lambda whose return contracts like
+    an n-step one is then ``lambda_for_horizon(n / m, gamma ** m)`` (n = 3, m = 3: lambda 0, the 3-step target).
 
     :param n: the horizon, at least 1 (1: lambda 0, the one-step target)
     :param gamma: the discount factor, in (0, 1)
@@ -90,6 +94,7 @@ class HorizonSamples:
 def sample_horizon_returns(
     buffer: OffOnBufferMixin,
     n_samples: int,
+    batch_size: int,
     lam: float,
     longest: int,
     gamma: float,
@@ -98,11 +103,13 @@ def sample_horizon_returns(
     env: Any = None,
 ) -> HorizonSamples:
     """
-    ``n_samples`` transitions drawn as SB3's ``sample()`` draws them (uniformly over the stored slots and envs, from
-    NumPy's global RNG), each with a horizon drawn from ``rng`` (see the module's docstring).
+    ``n_samples`` transitions drawn as ``n_samples / batch_size`` calls of SB3's ``sample(batch_size)`` draw them
+    (uniformly over the stored slots and envs, from NumPy's global RNG, in the same order: each minibatch's slots, then
+    its env indices), each with a horizon drawn from ``rng`` (see the module's docstring).
 
     :param buffer: the Off-On replay buffer
-    :param n_samples: how many transitions
+    :param n_samples: how many transitions (a multiple of ``batch_size``, or fewer than it)
+    :param batch_size: the size of the minibatches they are drawn as
     :param lam: lambda
     :param longest: the longest horizon in steps (OffOnQRDQN's ``lambda_block_size``), rounded down to whole windows
         of the buffer's ``n_steps``, at least one window
@@ -111,8 +118,13 @@ def sample_horizon_returns(
     :param rng: the generator of the horizons
     :param env: the VecNormalize wrapper, if any, to normalise observations and rewards with
     """
-    slots = buffer._draw_slots(n_samples)
-    envs = np.random.randint(0, buffer.n_envs, size=n_samples) if buffer.n_envs > 1 else np.zeros(n_samples, np.int64)
+    slot_parts, env_parts = [], []
+    for start in range(0, n_samples, batch_size):
+        size = min(batch_size, n_samples - start)
+        slot_parts.append(buffer._draw_slots(size))
+        # SB3 draws the env indices after the slots; with one env that draw leaves the RNG alone
+        env_parts.append(np.random.randint(0, buffer.n_envs, size=size) if buffer.n_envs > 1 else np.zeros(size, np.int64))
+    slots, envs = np.concatenate(slot_parts), np.concatenate(env_parts)
     stride = buffer.n_steps
     horizons = draw_horizons(rng, lam, n_samples, max(longest // stride, 1)) * stride
     inputs = buffer.lambda_inputs(slots, envs, gamma, env, lengths=horizons)

@@ -26,6 +26,7 @@ SelfOffOnQRDQN = TypeVar("SelfOffOnQRDQN", bound="OffOnQRDQN")
 # has the (quantile) Huber loss only
 SUPPORTED_MC_MIXING = ("lambda",)
 SUPPORTED_LOSSES = ("huber",)
+PRIORITIZED_NEEDS_CACHE = "`replay_buffer_class`: prioritised replay needs the cache (`lambda_cache=True`)"
 
 
 class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, QRDQN):
@@ -291,7 +292,7 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
             )
         buffer_class = self.replay_buffer_class
         if isinstance(buffer_class, type) and issubclass(buffer_class, PrioritizedBufferMixin):
-            raise ValueError("`replay_buffer_class`: prioritised replay needs the cache (`lambda_cache=True`)")
+            raise ValueError(PRIORITIZED_NEEDS_CACHE)
 
     def _setup_model(self) -> None:
         self._check_offon_arguments()
@@ -305,6 +306,10 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
         self._lambda_cache: LambdaReturnCache | None = None
 
     def _connect_replay_buffer(self) -> None:
+        # Also run by load_replay_buffer: a prioritised buffer loaded into a model without the cache would bring the
+        # cache back in silence (the prioritised draw is the cache's)
+        if not self.lambda_cache and isinstance(self.replay_buffer, PrioritizedBufferMixin):
+            raise ValueError(PRIORITIZED_NEEDS_CACHE)
         if not isinstance(self.replay_buffer, OffOnBufferMixin):
             raise ValueError(
                 f"`replay_buffer_class`: OffOnQRDQN needs an Off-On replay buffer (its episode ends and next actions make "
@@ -375,6 +380,7 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
         samples = sample_horizon_returns(
             self.replay_buffer,
             n_samples,
+            batch_size=self.batch_size,
             lam=self.mc_prob,
             longest=self.lambda_block_size,
             gamma=self.gamma,
