@@ -76,7 +76,9 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
     fresh horizon each time it is sampled, the newest transitions are trained on as soon as they are stored, and the
     cost per gradient step is n-step QR-DQN's: one target row per sample. It needs Peng's Q(lambda) (delta2 = 0) and
     the sampled form; ``lambda_block_size`` is then the longest horizon drawn, and prioritised replay is not supported.
-    With lambda = 0 it is n-step QR-DQN (``n_steps``) on the same samples.
+    The targets of a training call's gradient steps are computed together, at its start (the target network does not
+    change within a call; with ``double_q``, the online network's argmax is that of the call's start, as the cache's is
+    that of the refresh). With lambda = 0 it is n-step QR-DQN (``n_steps``) on the same samples.
 
     What OffOnQRDQN does not have: OffOnDQN's coin-flip modes (``mc_mixing`` other than ``"lambda"``), the squared error
     (``loss="mse"``) and dueling networks (``policy_kwargs=dict(dueling=True)``), each a ``ValueError``;
