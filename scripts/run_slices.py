@@ -108,9 +108,13 @@ def run_for(commands: list[list[str]], seconds: float, logs: Path, poll: float =
 
 
 def newest_checkpoints(root: Path) -> list[RunCheckpoint]:
-    """The newest checkpoint of every run under ``root/.checkpoints``, the runs that got furthest first."""
+    """
+    The newest checkpoint of every run under ``root/.checkpoints``, the runs that got furthest first: a grid's runs lie
+    in ``<grid>/<algo>/<env>_<seed>/``, a grid being one folder or, for a study's candidate, several
+    (``search/<candidate>/tuned``).
+    """
     runs = []
-    for spec in sorted(root.glob(".checkpoints/*/*/*/spec.json")):
+    for spec in sorted(root.glob(".checkpoints/**/spec.json")):
         folder = spec.parent
         try:
             step_folder = (folder / "latest").read_text().strip()
@@ -122,9 +126,12 @@ def newest_checkpoints(root: Path) -> list[RunCheckpoint]:
 
 
 def archive(root: Path, run: RunCheckpoint, target: Path, compression: str) -> Path:
-    """One run's newest checkpoint as ``target/<algo>__<env>_<seed>.tar.zst`` (zstd) or ``.tar.xz`` (xz)."""
+    """
+    One run's newest checkpoint as ``target/<grid>__<algo>__<env>_<seed>.tar.zst`` (zstd) or ``.tar.xz`` (xz), named
+    by its whole folder so that two grids' runs of one algorithm do not collide.
+    """
     names = ("spec.json", "latest", run.step_folder)
-    plain = target / f"{run.folder.parent.name}__{run.folder.name}.tar"
+    plain = target / f"{'__'.join(run.folder.parts[1:])}.tar"
     with tarfile.open(plain, "w") if compression == "zstd" else tarfile.open(f"{plain}.xz", "w:xz", preset=1) as tar:
         for name in names:
             tar.add(root / run.folder / name, arcname=str(run.folder / name))

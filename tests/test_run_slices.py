@@ -13,9 +13,9 @@ from helpers import load_script
 run_slices = load_script("run_slices")
 
 
-def fake_run(root: Path, algo: str, run: str, steps: list[int], size: int) -> Path:
+def fake_run(root: Path, algo: str, run: str, steps: list[int], size: int, grid: str = "grid") -> Path:
     """A run's checkpoint folder as scripts/benchmark.py leaves it: spec.json, ``latest`` and a folder per checkpoint."""
-    folder = root / ".checkpoints" / "grid" / algo / run
+    folder = root / ".checkpoints" / grid / algo / run
     folder.mkdir(parents=True)
     (folder / "spec.json").write_text(json.dumps({"algo": algo}))
     for step in steps:
@@ -109,4 +109,23 @@ def test_each_slice_is_a_benchmark_command_with_the_root_and_checkpoints(tmp_pat
         str(run_slices.BENCHMARK),
         *("--study", "benchmarks/minatar.yml", "--algos", "dqn", "--seeds", "44-44", "--workers", "5"),
         *("--root", "/tmp/raw", "--checkpoint-freq", "25000"),
+    ]
+
+
+def test_the_runs_of_a_candidates_nested_grid_are_packed_apart(tmp_path: Path) -> None:
+    """A study's candidates run in grids of several folders (``search/<candidate>/tuned``), two of them with the same
+    algorithm: each run is packed, under its own name, and unpacked where it was."""
+    root, out = tmp_path / "raw", tmp_path / "out"
+    for candidate in ("cache", "no_cache"):
+        fake_run(root, "offon_qrdqn", "MinAtar-Asterix-v0_1", [50_000], 1_000, grid=f"search/horizon_{candidate}/tuned")
+    out.mkdir()
+    lines = run_slices.pack(root, out)
+    assert [line.split(" at ")[0] for line in lines[:2]] == [
+        "packed .checkpoints/search/horizon_cache/tuned/offon_qrdqn/MinAtar-Asterix-v0_1",
+        "packed .checkpoints/search/horizon_no_cache/tuned/offon_qrdqn/MinAtar-Asterix-v0_1",
+    ]
+    unpacked = run_slices.unpack(sorted(out.glob("bundle*.tar")), tmp_path / "home")
+    assert sorted(unpacked) == [
+        ".checkpoints/search/horizon_cache/tuned/offon_qrdqn/MinAtar-Asterix-v0_1",
+        ".checkpoints/search/horizon_no_cache/tuned/offon_qrdqn/MinAtar-Asterix-v0_1",
     ]
