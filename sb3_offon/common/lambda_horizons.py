@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from sb3_offon.common.buffers import OffOnBufferMixin
+from sb3_offon.common.lambda_returns import no_value_after
 
 
 def lambda_for_horizon(n: float, gamma: float) -> float:
@@ -128,16 +129,13 @@ def sample_horizon_returns(
     stride = buffer.n_steps
     horizons = draw_horizons(rng, lam, n_samples, max(longest // stride, 1)) * stride
     inputs = buffer.lambda_inputs(slots, envs, gamma, env, lengths=horizons)
-    no_value_after = inputs["terminated"]
-    if cut_is_terminal:
-        no_value_after = no_value_after | ((inputs["next_actions"] < 0) & ~inputs["running_newest"])
     oldest, n_stored, _ = buffer.chronology()
     return HorizonSamples(
         slots=slots,
         envs=envs,
         added_at=buffer._n_adds - n_stored + (slots - oldest) % buffer.buffer_size,
         rewards=inputs["rewards"],
-        discounts=np.where(no_value_after, 0.0, inputs["discounts"]),
+        discounts=np.where(no_value_after(inputs, cut_is_terminal), 0.0, inputs["discounts"]),
         next_observations=inputs["next_observations"],
         horizons=inputs["lengths"],
     )

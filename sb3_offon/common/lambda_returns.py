@@ -240,6 +240,18 @@ class LambdaLayout:
         return float(np.count_nonzero(self.goes_on & (trace < 1.0))) / n_goes_on if n_goes_on else 0.0
 
 
+def no_value_after(inputs: dict[str, Any], cut_is_terminal: bool) -> np.ndarray:
+    """
+    Where no value follows the last step of a transition's window (:meth:`OffOnBufferMixin.lambda_inputs`): a
+    termination; with ``cut_is_terminal`` (``mc_truncation="terminal"``) an episode cut there too, but never the newest
+    transition of an episode still running (its episode goes on).
+    """
+    stops = inputs["terminated"]
+    if cut_is_terminal:
+        stops = stops | ((inputs["next_actions"] < 0) & ~inputs["running_newest"])
+    return stops
+
+
 def lambda_layout(
     buffer: OffOnBufferMixin, n_wanted: int, block_size: int, gamma: float, cut_is_terminal: bool, env: Any = None
 ) -> LambdaLayout:
@@ -264,9 +276,6 @@ def lambda_layout(
     goes_on[valid] = next_actions >= 0
     goes_on[:, :-stride] &= valid[:, stride:]
     goes_on[:, -stride:] = False
-    no_value_after = inputs["terminated"]
-    if cut_is_terminal:
-        no_value_after = no_value_after | ((next_actions < 0) & ~inputs["running_newest"])
     return LambdaLayout(
         valid=valid,
         slots=slots,
@@ -275,7 +284,7 @@ def lambda_layout(
         inputs=inputs,
         stride=stride,
         goes_on=goes_on,
-        no_value_after=no_value_after,
+        no_value_after=no_value_after(inputs, cut_is_terminal),
         whole_buffer=wants_whole_buffer(buffer.n_envs, first, n_stored, n_wanted),
     )
 

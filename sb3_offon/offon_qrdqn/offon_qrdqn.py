@@ -279,8 +279,8 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
 
     def _check_lambda_cache(self) -> None:
         """What training without the cache (``lambda_cache=False``) needs."""
-        # getattr: models saved before lambda_cache existed load with the cache, as they trained
-        self.lambda_cache = getattr(self, "lambda_cache", True)
+        # A model saved before lambda_cache existed loads with the constructor's default (load() runs __init__ first):
+        # the cache, as it trained
         if not isinstance(self.lambda_cache, (bool, np.bool_)):
             raise ValueError(f"`lambda_cache` must be True or False, got {self.lambda_cache!r}")
         if self.lambda_cache:
