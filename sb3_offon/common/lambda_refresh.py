@@ -193,6 +193,8 @@ class LambdaRefreshMixin:
             self._update_lambda_priorities(cache, entries, th.cat(errors).cpu().numpy())
         self.logger.record("train/loss", th.stack(losses).mean().item())
         self.logger.record("train/lambda", cache.lam)
+        if cache.lambda_spread is not None:  # a lambda chosen per transition: cache.lam is their mean
+            self.logger.record("train/lambda_std", cache.lambda_spread)
         self.logger.record("train/trace_cut_fraction", cache.trace_cut_fraction)
 
     def _lambda_chunk_tensors(

@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from sb3_offon.common.buffers import OffOnBufferMixin
+from sb3_offon.common.lambda_choice import choose_lambda
 
 # Maps a batch of next observations (normalised, in the buffer's layout) to (max_a Q_target(s', a), argmax_a) as NumPy
 TargetValueFn = Callable[[Any], tuple[np.ndarray, np.ndarray]]
@@ -89,6 +90,8 @@ class LambdaReturnCache:
     :param qlearning_prob: delta2 of the refresh
     :param trace_cut_fraction: the share of the continuations whose trace weight c_{t+1} was below 1
     :param whole_buffer: whether they are every transition stored at the refresh (each env's history one block)
+    :param lambda_spread: with a lambda chosen per transition (``lambda_choice``), the standard deviation of the chosen
+        lambdas (``lam`` is then their mean); None with a fixed lambda
     """
 
     slots: np.ndarray
@@ -100,6 +103,7 @@ class LambdaReturnCache:
     qlearning_prob: float
     trace_cut_fraction: float
     whole_buffer: bool = False
+    lambda_spread: float | None = None
     order: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     # Prioritised replay: a sum tree over the entries (their transitions' priorities), built at the first draw
     tree: Any = None
@@ -300,6 +304,7 @@ def compute_lambda_returns(
     cut_is_terminal: bool,
     key: int,
     env: Any = None,
+    choice: str = "fixed",
 ) -> LambdaReturnCache:
     """
     The lambda-returns of about ``n_wanted`` stored transitions (see the module's docstring), in blocks.
@@ -316,28 +321,52 @@ def compute_lambda_returns(
         its last step (the newest transition of a running episode, and a block's last, still bootstrap)
     :param key: the refresh key to store
     :param env: the VecNormalize wrapper, if any, to normalise observations and rewards with
+    :param choice: ``"fixed"``: ``lam`` for every transition; otherwise a rule of :mod:`sb3_offon.common.lambda_choice`
+        that chooses a lambda per transition (``lam`` unused)
     """
     layout = lambda_layout(buffer, n_wanted, block_size, gamma, cut_is_terminal, env)
-    inputs, goes_on = layout.inputs, layout.goes_on
-    next_values, greedy_actions = target_values(inputs["next_observations"])
+    next_values, greedy_actions = target_values(layout.inputs["next_observations"])
     trace = layout.trace(greedy_actions, qlearning_prob)  # c_{t+1} (c_{t+n} with n-step windows)
-    tail = np.where(layout.no_value_after, 0.0, next_values)  # the value after a transition whose trace stops there
+    chosen = None
+    if choice == "fixed":
+        returns = scalar_lambda_returns(layout, next_values, trace, lam)
+    else:
 
-    padded_values, padded_tail = layout.padded(next_values.astype(np.float64)), layout.padded(tail)
-    rewards = layout.padded(inputs["rewards"].astype(np.float64))
-    discounts = layout.padded(inputs["discounts"], fill=1.0)  # gamma, or gamma^k over a window of k steps
-    bootstrap = np.where(goes_on, (1.0 - lam * trace) * padded_values, padded_tail)
-    returns = backward_recurrence(
-        rewards + discounts * bootstrap, np.where(goes_on, discounts * lam * trace, 0.0), stride=layout.stride
-    )
+        def returns_of(lambdas: np.ndarray) -> np.ndarray:
+            return scalar_lambda_returns(layout, next_values, trace, lambdas)
+
+        returns, chosen = choose_lambda(choice, returns_of, layout.goes_on[layout.valid])
     return LambdaReturnCache(
         slots=layout.slots,
         envs=layout.envs,
         added_at=layout.added_at,
-        returns=returns[layout.valid].astype(np.float32),
+        returns=returns.astype(np.float32),
         key=key,
-        lam=lam,
+        lam=lam if chosen is None else chosen.mean,
         qlearning_prob=qlearning_prob,
         trace_cut_fraction=layout.trace_cut_fraction(trace),
         whole_buffer=layout.whole_buffer,
+        lambda_spread=None if chosen is None else chosen.spread,
     )
+
+
+def scalar_lambda_returns(layout: LambdaLayout, next_values: np.ndarray, trace: np.ndarray, lam: Any) -> np.ndarray:
+    """
+    The lambda-returns of a layout's transitions (the module's docstring), from V of their next states and their trace.
+
+    :param layout: the transitions and what their traces need (:func:`lambda_layout`)
+    :param next_values: V(s_next) per transition
+    :param trace: (padded) c per transition (:meth:`LambdaLayout.trace`)
+    :param lam: lambda: a float, or an array of K lambdas shaped (K, 1, 1) for the returns of each at once
+    :return: float64, (transitions,), or (K, transitions) for K lambdas
+    """
+    goes_on = layout.goes_on
+    tail = np.where(layout.no_value_after, 0.0, next_values)  # the value after a transition whose trace stops there
+    padded_values, padded_tail = layout.padded(next_values.astype(np.float64)), layout.padded(tail)
+    rewards = layout.padded(layout.inputs["rewards"].astype(np.float64))
+    discounts = layout.padded(layout.inputs["discounts"], fill=1.0)  # gamma, or gamma^k over a window of k steps
+    bootstrap = np.where(goes_on, (1.0 - lam * trace) * padded_values, padded_tail)
+    returns = backward_recurrence(
+        rewards + discounts * bootstrap, np.where(goes_on, discounts * lam * trace, 0.0), stride=layout.stride
+    )
+    return returns[..., layout.valid]

@@ -22,6 +22,7 @@ from sb3_offon.common.buffers import (
     OffOnNStepReplayBuffer,
     OffOnReplayBuffer,
 )
+from sb3_offon.common.lambda_choice import LAMBDA_CHOICES
 
 MC_TRUNCATION_OPTIONS = ("bootstrap", "terminal", "drop")
 
@@ -84,7 +85,7 @@ def check_training_arguments(model: Any) -> None:
 def check_lambda_arguments(model: Any) -> None:
     """
     Check the arguments that OffOnDQN and OffOnQRDQN share: the delta1 and delta2 schedules, ``mc_truncation``,
-    ``double_q``, ``lambda_block_size`` and ``lambda_refresh_interval``.
+    ``double_q``, ``lambda_block_size``, ``lambda_refresh_interval`` and ``lambda_choice``.
 
     :raises ValueError: naming the first bad parameter
     """
@@ -97,6 +98,7 @@ def check_lambda_arguments(model: Any) -> None:
         if not 0.0 < value <= 1.0:
             raise ValueError(f"`{name}` must be in (0, 1], got {value!r}")
     check_option("mc_truncation", model.mc_truncation, MC_TRUNCATION_OPTIONS)
+    check_option("lambda_choice", model.lambda_choice, LAMBDA_CHOICES)
     # getattr: models saved before double_q existed load without it (and train as before, without double Q)
     if not isinstance(getattr(model, "double_q", False), (bool, np.bool_)):
         raise ValueError(f"`double_q` must be True or False, got {model.double_q!r}")

@@ -33,6 +33,7 @@ class LambdaTrainingMixin(LambdaRefreshMixin):
     qlearning_prob: float
     mc_truncation: str
     lambda_block_size: int
+    lambda_choice: str
     _to_device: Callable[[np.ndarray], th.Tensor]
     _loss_fn: Callable[[], Callable[..., th.Tensor]]
     _bootstrap: Callable[[Any], tuple[th.Tensor, th.Tensor, th.Tensor]]
@@ -69,6 +70,7 @@ class LambdaTrainingMixin(LambdaRefreshMixin):
             cut_is_terminal=self.mc_truncation == "terminal",
             key=key,
             env=self._vec_normalize_env,
+            choice=self.lambda_choice,
         )
 
     def _target_values_and_actions(self, observations: np.ndarray | dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:

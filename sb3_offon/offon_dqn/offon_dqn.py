@@ -49,6 +49,7 @@ OFFON_PARAMETERS = (
     "loss",
     "lambda_block_size",
     "lambda_refresh_interval",
+    "lambda_choice",
     "double_q",
 )
 
@@ -218,6 +219,10 @@ class OffOnDQN(
     :param lambda_refresh_interval: ``mc_mixing="lambda"``: recompute the cached lambda-returns every this many env
         steps; None (default): whenever the target network is updated (every ``target_update_interval`` steps). Set it
         with soft target updates every step (``tau`` < 1), where refreshing at each update would cost most
+    :param lambda_choice: ``mc_mixing="lambda"``: ``"fixed"`` (default), lambda is delta1 for every transition;
+        ``"median"``, a lambda per transition chosen at each refresh from the data (DQN(lambda)'s dynamic return: the
+        median of the lambda-returns for lambda = 0, 0.05, ..., 1; :mod:`sb3_offon.common.lambda_choice`), delta1 then
+        unused. The chosen lambdas' mean and standard deviation are logged as ``train/lambda`` and ``train/lambda_std``
     :param double_q: double Q-learning in every bootstrap (see above): the online network picks the action, the target
         network values it. Default False (DQN's max over the target network)
     :param non_finite: what a non-finite reward does: ``"raise"`` (default) a ``NonFiniteError`` naming the env and step,
@@ -276,6 +281,7 @@ class OffOnDQN(
         loss: str = "huber",
         lambda_block_size: int = 100,
         lambda_refresh_interval: int | None = None,
+        lambda_choice: str = "fixed",
         double_q: bool = False,
         non_finite: str = "raise",
         stats_window_size: int = 100,
@@ -328,6 +334,7 @@ class OffOnDQN(
         self.loss = loss
         self.lambda_block_size = lambda_block_size
         self.lambda_refresh_interval = lambda_refresh_interval
+        self.lambda_choice = lambda_choice
         self.double_q = double_q
         self.non_finite = non_finite
         # The Off-On arguments are checked by _setup_model (which load() also runs); the buffer's discounting here, on
@@ -354,6 +361,11 @@ class OffOnDQN(
             ("loss", tuple(LOSS_FUNCTIONS)),
         ):
             check_option(name, getattr(self, name), options)
+        if self.lambda_choice != "fixed" and self.mc_mixing != "lambda":
+            raise ValueError(
+                f"`lambda_choice` {self.lambda_choice!r} chooses the lambda of the lambda-returns: it needs "
+                f"`mc_mixing='lambda'`, got {self.mc_mixing!r}"
+            )
 
     def _setup_model(self) -> None:
         self._check_offon_arguments()

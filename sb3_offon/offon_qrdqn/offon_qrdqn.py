@@ -131,6 +131,11 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
     :param lambda_form: ``"sampled"`` (default) or ``"projected"`` (see above)
     :param lambda_cache: True (default): train on the cached lambda-returns of each refresh; False: draw a horizon per
         sample at each training call, from the whole buffer (see above)
+    :param lambda_choice: ``"fixed"`` (default), lambda is delta1 for every transition; ``"median"``, a lambda per
+        transition chosen at each refresh from the data (DQN(lambda)'s dynamic return, applied to the mean of the
+        target atoms: :mod:`sb3_offon.common.lambda_choice`), delta1 then unused; the transition's target is its chosen
+        lambda's sampled horizon. Needs the cache and the sampled form. The chosen lambdas' mean and standard deviation
+        are logged as ``train/lambda`` and ``train/lambda_std``
     :param non_finite: what a non-finite reward does: ``"raise"`` (default) a ``NonFiniteError`` naming the env and step,
         nothing of that step stored; ``"skip"`` a warning, the step's transitions not stored and the running episodes
         cut there as truncations. A non-finite loss always raises (:mod:`sb3_offon.common.non_finite`)
@@ -189,6 +194,7 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
         double_q: bool = False,
         lambda_form: str = "sampled",
         lambda_cache: bool = True,
+        lambda_choice: str = "fixed",
         non_finite: str = "raise",
         stats_window_size: int = 100,
         tensorboard_log: str | None = None,
@@ -243,6 +249,7 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
         self.double_q = double_q
         self.lambda_form = lambda_form
         self.lambda_cache = lambda_cache
+        self.lambda_choice = lambda_choice
         self.non_finite = non_finite
         self._check_buffer_discounting()
         # The sampled horizons have a generator of their own (saved with the model: a resumed run draws on)
@@ -268,6 +275,11 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
             except ValueError as error:
                 raise ValueError(f"{error}{f' ({what})' if what else ''}") from None
         self._check_lambda_cache()
+        if self.lambda_choice != "fixed" and (self.lambda_form != "sampled" or not self.lambda_cache):
+            raise ValueError(
+                f"`lambda_choice` {self.lambda_choice!r} chooses a lambda per transition at each refresh of the cache and "
+                "draws its horizon: it needs `lambda_cache=True` and `lambda_form='sampled'`"
+            )
         if not isinstance(self.sarsa_target, str):
             raise ValueError(f"`sarsa_target` must be a string, got {self.sarsa_target!r}")
         if "dueling" in (self.policy_kwargs or {}):
@@ -365,6 +377,7 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
             form=self.lambda_form,
             rng=self.target_rng,
             env=self._vec_normalize_env,
+            choice=self.lambda_choice,
         )
 
     def _draw_lambda_entries(self, n_samples: int) -> tuple[LambdaReturnCache, np.ndarray]:

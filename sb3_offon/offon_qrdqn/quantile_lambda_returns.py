@@ -38,7 +38,14 @@ from typing import Any
 import numpy as np
 
 from sb3_offon.common.buffers import OffOnBufferMixin
-from sb3_offon.common.lambda_returns import LambdaLayout, LambdaReturnCache, backward_recurrence, lambda_layout
+from sb3_offon.common.lambda_choice import choose_lambda
+from sb3_offon.common.lambda_returns import (
+    LambdaLayout,
+    LambdaReturnCache,
+    backward_recurrence,
+    lambda_layout,
+    scalar_lambda_returns,
+)
 
 LAMBDA_FORMS = ("sampled", "projected")
 
@@ -59,6 +66,7 @@ def compute_quantile_lambda_returns(
     form: str = "sampled",
     rng: np.random.Generator | None = None,
     env: Any = None,
+    choice: str = "fixed",
 ) -> LambdaReturnCache:
     """
     The N target atoms of the distributional lambda-returns of about ``n_wanted`` stored transitions (see the module's
@@ -76,15 +84,31 @@ def compute_quantile_lambda_returns(
     :param form: ``"sampled"`` or ``"projected"``
     :param rng: the generator of the sampled horizons (``"sampled"`` only)
     :param env: the VecNormalize wrapper, if any, to normalise observations and rewards with
+    :param choice: ``"fixed"``: ``lam`` for every transition; otherwise a rule of :mod:`sb3_offon.common.lambda_choice`,
+        applied to the scalar lambda-returns of the atoms' mean, that chooses a lambda per transition (``lam`` unused;
+        the sampled form only)
     """
     if form not in LAMBDA_FORMS:
         raise ValueError(f"`lambda_form` must be one of {LAMBDA_FORMS}, got {form!r}")
+    if choice != "fixed" and form != "sampled":
+        raise ValueError(f"`lambda_choice` {choice!r} needs the sampled form (`lambda_form='sampled'`), got {form!r}")
     layout = lambda_layout(buffer, n_wanted, block_size, gamma, cut_is_terminal, env)
     next_quantiles, greedy_actions = target_quantiles(layout.inputs["next_observations"])
     trace = layout.trace(greedy_actions, qlearning_prob)
-    if form == "sampled":
-        if rng is None:
-            raise ValueError("the sampled form needs a generator (`rng`)")
+    chosen = None
+    if form == "sampled" and rng is None:
+        raise ValueError("the sampled form needs a generator (`rng`)")
+    if choice != "fixed":
+        assert rng is not None
+        next_means = next_quantiles.astype(np.float64).mean(axis=1)
+
+        def returns_of(lambdas: np.ndarray) -> np.ndarray:
+            return scalar_lambda_returns(layout, next_means, trace, lambdas)
+
+        _, chosen = choose_lambda(choice, returns_of, layout.goes_on[layout.valid])
+        atoms = _sampled_targets_of_own_lambdas(layout, next_quantiles, chosen.values, trace, rng)
+    elif form == "sampled":
+        assert rng is not None
         atoms = _sampled_targets(layout, next_quantiles, lam * trace, rng)
     else:
         atoms = _projected_targets(layout, next_quantiles, lam * trace)
@@ -94,10 +118,11 @@ def compute_quantile_lambda_returns(
         added_at=layout.added_at,
         returns=atoms.astype(np.float32),
         key=key,
-        lam=lam,
+        lam=lam if chosen is None else chosen.mean,
         qlearning_prob=qlearning_prob,
         trace_cut_fraction=layout.trace_cut_fraction(trace),
         whole_buffer=layout.whole_buffer,
+        lambda_spread=None if chosen is None else chosen.spread,
     )
 
 
@@ -135,6 +160,39 @@ def _sampled_targets(
     stop_cells = np.rint(stop[layout.valid]).astype(np.int64)
     stop_atoms = _stop_atoms(layout, next_quantiles).reshape(layout.valid.size, -1)[stop_cells]
     return returns[layout.valid][:, None] + discount_to_stop[layout.valid][:, None] * stop_atoms
+
+
+def _sampled_targets_of_own_lambdas(
+    layout: LambdaLayout, next_quantiles: np.ndarray, lambdas: np.ndarray, trace: np.ndarray, rng: np.random.Generator
+) -> np.ndarray:
+    """
+    (transitions, N) As :func:`_sampled_targets`, but each transition's trace goes on with its own lambda (``lambdas``,
+    one per transition, as ``lambda_choice`` picks them) times c at each step: the trace of t goes on past a step where
+    it can with probability lambdas[t] * c there. One uniform per stored step is drawn, as there, and every trace that
+    reaches a step compares it with its own lambda; with one lambda for all, the horizons are those of
+    :func:`_sampled_targets` on the same draws. A trace's steps are walked one at a time for all transitions at once
+    (at most a block's length / ``stride`` rounds), since traces of different lambdas no longer share their ends.
+    """
+    stride = layout.stride
+    uniforms = rng.random(layout.valid.shape)
+    rows, columns = np.nonzero(layout.valid)  # the transitions, in the order of padded[valid]
+    rewards = layout.padded(layout.inputs["rewards"].astype(np.float64))
+    discounts = layout.padded(layout.inputs["discounts"], fill=1.0)
+    n_transitions = len(rows)
+    returns, discount_to_stop = np.zeros(n_transitions), np.ones(n_transitions)
+    stop_cells = np.zeros(n_transitions, dtype=np.int64)
+    walking = np.arange(n_transitions)  # the transitions whose trace has not stopped
+    while len(walking):
+        row, column = rows[walking], columns[walking]
+        returns[walking] += discount_to_stop[walking] * rewards[row, column]
+        discount_to_stop[walking] *= discounts[row, column]
+        goes_on = layout.goes_on[row, column] & (uniforms[row, column] < lambdas[walking] * trace[row, column])
+        stopping = ~goes_on
+        stop_cells[walking[stopping]] = row[stopping] * layout.valid.shape[1] + column[stopping]
+        walking = walking[goes_on]
+        columns[walking] += stride
+    stop_atoms = _stop_atoms(layout, next_quantiles).reshape(layout.valid.size, -1)[stop_cells]
+    return returns[:, None] + discount_to_stop[:, None] * stop_atoms
 
 
 def _projected_targets(layout: LambdaLayout, next_quantiles: np.ndarray, continue_weight: np.ndarray) -> np.ndarray:

@@ -1,0 +1,74 @@
+"""
+A lambda that chooses itself (``lambda_choice``): at each refresh of the cached lambda-returns, a lambda per transition
+chosen from the data, computed from the same pass of the target network as a fixed lambda's returns (no extra pass, no
+read-back), for OffOnDQN (``mc_mixing="lambda"``) and OffOnQRDQN alike.
+
+``"median"``, DQN(lambda)'s dynamic return (Daley & Amato 2019; ``DynamicLambdaReplayMemory`` in their code, never
+published with figures): per transition, the lambda-returns for lambda = 0, 0.05, ..., 1 (21 of them, with the same
+windows, trace cuts and bootstraps as a fixed lambda's), and the one whose value is their median. The target is one of
+those returns, so the rule has no bound and no scale: it serves returns of 500 and of 20 alike. The chosen lambda is
+the one whose return is the median (where several lambdas give the same return, as where the trace cannot go on, the
+middle of the grid among them).
+
+What it does, read from the returns: with Peng's trace (c = 1), G^lam_t - V(s_t) = sum_k (gamma lam)^k delta_{t+k}, the
+TD errors delta along the trace, a polynomial in lambda with those coefficients. Where the TD errors along the trace
+share a sign (a critic that is off in one direction, as early in training), G^lam is monotone in lambda and its median
+over the grid is lambda = 0.5 exactly; the rule moves away from 0.5 only where the TD errors disagree in sign, towards
+the lambda whose return sits between the others. It is robust, not horizon-seeking: it does not reach for lambda 0.9
+where long horizons would pay.
+
+For OffOnQRDQN the rule is applied to the law's mean (the scalar lambda-returns of the mean of the target atoms at the
+bootstrap action), and each transition's distributional target is then its chosen lambda's, in the sampled form
+(:mod:`sb3_offon.offon_qrdqn.quantile_lambda_returns`).
+"""
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+LAMBDA_CHOICES = ("fixed", "median")
+# The lambdas the median rule chooses among (DQN(lambda)'s grid)
+MEDIAN_GRID = np.linspace(0.0, 1.0, 21)
+
+
+@dataclass
+class ChosenLambdas:
+    """
+    The lambdas a rule chose for the transitions of one refresh.
+
+    :param values: one per transition
+    :param mean: their mean over the transitions whose trace can go on (where lambda changes the return), or the
+        grid's middle if there are none
+    :param spread: their standard deviation over the same transitions (0 if none)
+    """
+
+    values: np.ndarray
+    mean: float
+    spread: float
+
+
+def choose_lambda(
+    choice: str, returns_of: Callable[[np.ndarray], np.ndarray], goes_on: np.ndarray
+) -> tuple[np.ndarray, ChosenLambdas]:
+    """
+    The targets and the lambdas that rule ``choice`` picks per transition.
+
+    :param choice: a rule of :data:`LAMBDA_CHOICES` other than ``"fixed"``
+    :param returns_of: maps K lambdas, shaped (K, 1, 1), to the scalar lambda-returns of each, shaped (K, transitions)
+    :param goes_on: per transition, whether its trace can go on past its first window (else lambda does not matter)
+    :return: the chosen returns (transitions,) as float64, and the chosen lambdas
+    """
+    if choice != "median":
+        raise ValueError(f"`lambda_choice` must be one of {LAMBDA_CHOICES}, got {choice!r}")
+    grid = MEDIAN_GRID
+    returns = returns_of(grid[:, None, None])  # (K, transitions)
+    # The stable sort keeps tied returns in grid order, so where lambda does not matter the middle lambda is chosen
+    order = np.argsort(returns, axis=0, kind="stable")
+    picked = order[len(grid) // 2]
+    columns = np.arange(returns.shape[1])
+    values = grid[picked]
+    counted = values[goes_on]
+    mean = float(counted.mean()) if len(counted) else float(grid[len(grid) // 2])
+    spread = float(counted.std()) if len(counted) else 0.0
+    return returns[picked, columns], ChosenLambdas(values=values, mean=mean, spread=spread)

@@ -1,0 +1,186 @@
+"""lambda_choice="median": the chosen lambdas and targets against hand-computed values and the fixed-lambda returns."""
+
+import numpy as np
+import pandas as pd
+import pytest
+from stable_baselines3.common.logger import configure
+from test_quantile_lambda_returns import GAMMA, fake_quantiles, fake_values, make_buffer, step
+
+from sb3_offon import OffOnDQN, OffOnQRDQN
+from sb3_offon.common.lambda_choice import MEDIAN_GRID, choose_lambda
+from sb3_offon.common.lambda_returns import compute_lambda_returns, lambda_layout
+from sb3_offon.offon_qrdqn import quantile_lambda_returns
+from sb3_offon.offon_qrdqn.quantile_lambda_returns import compute_quantile_lambda_returns
+
+SMALL = dict(learning_starts=100, batch_size=16, train_freq=4, target_update_interval=50, policy_kwargs=dict(net_arch=[16]))
+
+
+def table_target(values):
+    """A target network given as a table: V(s) = values[id of s], greedy action 0."""
+
+    def target(next_observations):
+        ids = np.asarray(next_observations).reshape(-1).astype(int)
+        return np.array([values.get(i, 0.0) for i in ids], dtype=np.float32), np.zeros(len(ids), dtype=np.int64)
+
+    return target
+
+
+def chain(rewards):
+    """One terminated episode with these rewards; its next states have ids 11, 12, ..."""
+    buffer = make_buffer()
+    for i, reward in enumerate(rewards):
+        step(buffer, [reward], [0], [11 + i], dones=[i == len(rewards) - 1])
+    return buffer
+
+
+def median_cache(buffer, target, qlearning_prob=0.0, block_size=100, n_wanted=10**9):
+    return compute_lambda_returns(
+        buffer, target, n_wanted, block_size, GAMMA, 0.9, qlearning_prob, False, key=0, choice="median"
+    )
+
+
+def by_slot(cache, env=0):
+    mine = cache.envs == env
+    order = np.argsort(cache.slots[mine])
+    return cache.returns[mine][order]
+
+
+def test_a_critic_off_in_one_direction_gives_the_middle_lambda():
+    # Rewards 1, 2, 3 (gamma 0.5), V = 0 everywhere: G^lam_2 = 2 + 1.5 lam, G^lam_1 = 1 + lam + 0.75 lam^2, both
+    # increasing in lambda, so the median of the 21 is lambda 0.5's
+    cache = median_cache(chain([1.0, 2.0, 3.0]), table_target({}))
+    np.testing.assert_allclose(by_slot(cache), [1.6875, 2.75, 3.0])
+    assert cache.lam == 0.5 and cache.lambda_spread == 0.0
+
+
+def test_an_exact_critic_gives_its_own_values():
+    # The true values of the chain: after step 1, 2 + 0.5 * 3 = 3.5; after step 2, 3. Every lambda-return is then the
+    # true return of the transition, so any lambda gives it; the tie goes to the middle of the grid
+    cache = median_cache(chain([1.0, 2.0, 3.0]), table_target({11: 3.5, 12: 3.0}))
+    np.testing.assert_allclose(by_slot(cache), [2.75, 3.5, 3.0])
+    assert cache.lam == 0.5 and cache.lambda_spread == 0.0
+
+
+def test_td_errors_of_both_signs_move_the_chosen_lambda():
+    # Rewards 0, 0, 8, V(after step 1) = 3, V(after step 2) = -4, gamma 0.5:
+    # G_2 = 0.5 [(1 - lam)(-4) + 8 lam] = -2 + 6 lam (increasing: lambda 0.5, G = 1);
+    # G_1 = 0.5 [(1 - lam) 3 + lam G_2] = 1.5 - 2.5 lam + 3 lam^2, a parabola whose vertex is at lam = 5/12: on the grid,
+    # ordered by value, 0.40, 0.45, 0.35, 0.50, 0.30, 0.55, 0.25, 0.60, 0.20, 0.65, then 0.15, the 11th of 21: the median,
+    # 3 * 0.15^2 - 2.5 * 0.15 + 1.5 = 1.1925
+    cache = median_cache(chain([0.0, 0.0, 8.0]), table_target({11: 3.0, 12: -4.0}))
+    np.testing.assert_allclose(by_slot(cache), [1.1925, 1.0, 8.0], rtol=1e-6)
+    # The last transition's trace cannot go on (its lambda does not count): the mean and spread of 0.15 and 0.5
+    assert cache.lam == pytest.approx(0.325)
+    assert cache.lambda_spread == pytest.approx(0.175)
+
+
+def varied_buffer(n_steps=1, seed=0):
+    """Two envs of different episode lengths, cut and terminated episodes, non-greedy actions, a ring that wraps."""
+    rng = np.random.default_rng(seed)
+    buffer = make_buffer(buffer_size=12, n_envs=2, n_steps=n_steps)
+    for i in range(30):
+        dones = [i % 5 == 4, i % 7 == 6]
+        truncated = [i % 10 == 9, False]
+        step(buffer, rng.normal(size=2), rng.integers(0, 5, size=2), rng.integers(1, 40, size=2), dones, truncated)
+    return buffer
+
+
+@pytest.mark.parametrize("n_steps", [1, 3])
+@pytest.mark.parametrize("qlearning_prob", [0.0, 0.5])
+def test_the_median_of_the_fixed_lambda_returns(n_steps, qlearning_prob):
+    # DQN(lambda)'s rule written out: the 21 fixed-lambda caches (each checked elsewhere against a literal transcription)
+    # and their median per transition, on the whole buffer (one block per env, so every cache has the same transitions)
+    buffer = varied_buffer(n_steps)
+    fixed = [
+        by_slot(compute_lambda_returns(buffer, fake_values, 10**9, 100, GAMMA, lam, qlearning_prob, False, key=0), env)
+        for lam in MEDIAN_GRID
+        for env in (0, 1)
+    ]
+    per_lambda = np.array(fixed).reshape(len(MEDIAN_GRID), 2, -1)
+    cache = median_cache(buffer, fake_values, qlearning_prob)
+    for env in (0, 1):
+        np.testing.assert_array_equal(by_slot(cache, env), np.median(per_lambda[:, env], axis=0))
+
+
+def test_choose_lambda_refuses_an_unknown_rule():
+    with pytest.raises(ValueError, match="`lambda_choice`"):
+        choose_lambda("mean", lambda lambdas: np.zeros((len(lambdas), 3)), np.ones(3, dtype=bool))
+
+
+@pytest.mark.parametrize("n_steps", [1, 3])
+def test_own_lambdas_draw_the_shared_horizons_when_they_are_equal(n_steps):
+    # With one lambda for all, the walk along each trace stops where the shared draw's recurrence stops it
+    buffer = varied_buffer(n_steps, seed=1)
+    np.random.seed(3)
+    layout = lambda_layout(buffer, 10, 4, GAMMA, False)  # blocks of 4: traces cut at blocks' ends too
+    next_quantiles, greedy = fake_quantiles(layout.inputs["next_observations"])
+    trace = layout.trace(greedy, 0.5)
+    shared = quantile_lambda_returns._sampled_targets(layout, next_quantiles, 0.7 * trace, np.random.default_rng(5))
+    own = quantile_lambda_returns._sampled_targets_of_own_lambdas(
+        layout, next_quantiles, np.full(len(layout.slots), 0.7), trace, np.random.default_rng(5)
+    )
+    np.testing.assert_allclose(own, shared, rtol=1e-12, atol=1e-12)
+
+
+def test_the_quantile_critic_chooses_on_the_mean_and_draws_each_transitions_own_horizon():
+    buffer = varied_buffer(n_steps=1, seed=2)
+    scalar = median_cache(buffer, fake_values, qlearning_prob=0.5)  # the rule on the atoms' mean
+    n_draws = 3000
+    targets = []
+    for seed in range(n_draws):
+        cache = compute_quantile_lambda_returns(
+            buffer, fake_quantiles, 10**9, 100, GAMMA, 0.9, 0.5, False, key=0, rng=np.random.default_rng(seed), choice="median"
+        )
+        assert cache.lam == scalar.lam and cache.lambda_spread == scalar.lambda_spread
+        targets.append(np.concatenate([by_slot(cache, 0), by_slot(cache, 1)]).mean(axis=1))
+    assert 0.0 < scalar.lambda_spread and scalar.lam != 0.5  # the rule moved away from the middle somewhere
+    # The mean of a drawn horizon's target law, over the draws, is the chosen lambda's scalar return (the atoms'
+    # offsets have mean 0): within 4 standard errors, and float32's rounding where the horizon is certain
+    draws = np.array(targets, dtype=np.float64)
+    expected = np.concatenate([by_slot(scalar, 0), by_slot(scalar, 1)])
+    error = draws.std(axis=0) / np.sqrt(n_draws)
+    assert np.all(np.abs(draws.mean(axis=0) - expected) <= 4 * error + 1e-5 * (1.0 + np.abs(expected)))
+
+
+def test_the_projected_form_is_refused():
+    with pytest.raises(ValueError, match="sampled form"):
+        compute_quantile_lambda_returns(
+            chain([1.0]), fake_quantiles, 10, 100, GAMMA, 0.9, 0.0, False, key=0, form="projected", choice="median"
+        )
+
+
+@pytest.mark.parametrize("algo", [OffOnDQN, OffOnQRDQN])
+def test_models_log_the_chosen_lambdas_and_keep_the_choice_on_load(algo, tmp_path):
+    model = algo("MlpPolicy", "CartPole-v1", lambda_choice="median", seed=0, **SMALL)
+    model.set_logger(configure(str(tmp_path / "log"), ["csv"]))
+    model.learn(400)
+    logged = pd.read_csv(tmp_path / "log" / "progress.csv")[["train/lambda", "train/lambda_std"]].dropna()
+    assert len(logged) and logged["train/lambda"].between(0, 1).all() and (logged["train/lambda_std"] >= 0).all()
+    model.save(tmp_path / "model")
+    loaded = algo.load(tmp_path / "model", env=model.get_env())
+    assert loaded.lambda_choice == "median"
+    loaded.learn(200)
+
+
+@pytest.mark.parametrize("algo", [OffOnDQN, OffOnQRDQN])
+def test_a_fixed_lambda_logs_no_spread(algo, tmp_path):
+    model = algo("MlpPolicy", "CartPole-v1", seed=0, **SMALL)
+    model.set_logger(configure(str(tmp_path / "log"), ["csv"]))
+    model.learn(400)
+    columns = pd.read_csv(tmp_path / "log" / "progress.csv").columns
+    assert "train/lambda" in columns and "train/lambda_std" not in columns
+
+
+@pytest.mark.parametrize(
+    ("algo", "kwargs", "message"),
+    [
+        (OffOnDQN, dict(lambda_choice="mean"), "`lambda_choice` must be one of"),
+        (OffOnDQN, dict(lambda_choice="median", mc_mixing="sample"), "needs `mc_mixing='lambda'`"),
+        (OffOnQRDQN, dict(lambda_choice="mean"), "`lambda_choice` must be one of"),
+        (OffOnQRDQN, dict(lambda_choice="median", lambda_form="projected"), "lambda_form='sampled'"),
+        (OffOnQRDQN, dict(lambda_choice="median", lambda_cache=False), "lambda_cache=True"),
+    ],
+)
+def test_bad_choices_are_refused(algo, kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        algo("MlpPolicy", "CartPole-v1", **kwargs)
