@@ -5,6 +5,7 @@ Each criterion of a study's ``rule`` is of one kind:
 
 - ``final_not_below`` (``reference``): on every env, the upper bound of the interval of the candidate's mean final
   return minus the reference's is at least 0 (two-sample percentile bootstrap, the seeds of each side resampled apart);
+- ``auc_not_below`` (``reference``): the same on the mean AUC (the mean of a run's evaluations);
 - ``final_within`` (``reference``, ``margin``): on every env, the candidate's mean final return is at least the
   reference's minus ``margin`` times the env's range (``ranges``: ``[low, high]`` per env);
 - ``iqm_above`` (``measure``: ``auc`` or ``final``; ``reference``): the candidate's IQM of normalised scores over every
@@ -118,12 +119,17 @@ def iqm_intervals(study: Study, runs: dict, scores: dict, measure: str) -> dict[
     return {algo: (float(point[algo][0]), float(interval[algo][0, 0]), float(interval[algo][1, 0])) for algo in ready}
 
 
-def final_difference(study: Study, scores: dict, env: str, algo: str, reference: str) -> tuple[float, float, float] | None:
-    """The mean final return of ``algo`` minus ``reference``'s on ``env``, with its interval (None: a side is missing)."""
+def final_difference(
+    study: Study, scores: dict, env: str, algo: str, reference: str, measure: str = "final"
+) -> tuple[float, float, float] | None:
+    """
+    The mean final return (or ``measure``: ``auc``) of ``algo`` minus ``reference``'s on ``env``, with its interval
+    (None: a side is missing).
+    """
     by_algo = scores.get(env, {})
     if algo not in by_algo or reference not in by_algo:
         return None
-    return two_sample_ci(by_algo[algo]["final"], by_algo[reference]["final"], mean_difference, study.reps_difference)
+    return two_sample_ci(by_algo[algo][measure], by_algo[reference][measure], mean_difference, study.reps_difference)
 
 
 # ----------------------------------------------------------------------------------------------------------------------
@@ -133,8 +139,9 @@ def judge_criterion(study: Study, runs: dict, scores: dict, criterion: dict, alg
     """Whether one criterion holds for ``algo`` (None: runs missing), and a line that says why."""
     kind, reference = criterion["kind"], criterion["reference"]
     envs = list(criterion.get("envs", study.envs))
-    if kind == "final_not_below":
-        return final_not_below(study, runs, scores, algo, reference, float(criterion.get("margin", 0.0)), envs)
+    if kind in ("final_not_below", "auc_not_below"):
+        margin, measure = float(criterion.get("margin", 0.0)), kind.split("_")[0]
+        return final_not_below(study, runs, scores, algo, reference, margin, envs, measure)
     if kind == "iqm_above":
         measure = criterion["measure"]
         iqms = iqm_intervals(study, runs, scores, measure)
@@ -161,16 +168,24 @@ def complete_pair(study: Study, runs: dict, env: str, algo: str, reference: str)
 
 
 def final_not_below(
-    study: Study, runs: dict, scores: dict, algo: str, reference: str, margin: float, envs: list[str]
+    study: Study,
+    runs: dict,
+    scores: dict,
+    algo: str,
+    reference: str,
+    margin: float,
+    envs: list[str],
+    measure: str = "final",
 ) -> tuple[bool | None, str]:
-    """On every env, the upper bound of the interval of (``algo`` - reference) mean final return at least minus
-    ``margin`` times the env's range (0: not below zero)."""
-    text = f"final return not below {study.label(reference)}'s on any env by the interval of the difference"
+    """On every env, the upper bound of the interval of (``algo`` - reference) mean final return (or ``measure``:
+    ``auc``) at least minus ``margin`` times the env's range (0: not below zero)."""
+    what = "final return" if measure == "final" else "AUC"
+    text = f"{what} not below {study.label(reference)}'s on any env by the interval of the difference"
     if margin:
         text += f" by more than {margin:g} of the env's range"
     below, cells = [], []
     for env in envs:
-        difference = final_difference(study, scores, env, algo, reference)
+        difference = final_difference(study, scores, env, algo, reference, measure)
         if difference is None or not complete_pair(study, runs, env, algo, reference):
             return None, f"{text}: runs missing on {env}"
         if np.isnan(difference[2]):

@@ -80,10 +80,12 @@ def per_env_table(study: Study, runs: dict, scores: dict, measure: str) -> list[
 def difference_references(study: Study) -> list[str]:
     """
     The algorithms the report subtracts every other's final return from: DQN, then each reference of a
-    ``final_not_below`` criterion of the rule (QR-DQN's, say), so that every algorithm of the study is also read against
-    the one the rule holds the candidate to, not the candidate alone.
+    ``final_not_below`` or ``auc_not_below`` criterion of the rule (QR-DQN's, say), so that every algorithm of the study
+    is also read against the one the rule holds the candidate to, not the candidate alone.
     """
-    references = ["dqn"] + [criterion["reference"] for criterion in study.rule if criterion["kind"] == "final_not_below"]
+    references = ["dqn"] + [
+        criterion["reference"] for criterion in study.rule if criterion["kind"] in ("final_not_below", "auc_not_below")
+    ]
     return [algo for algo in dict.fromkeys(references) if algo in study.algos]
 
 

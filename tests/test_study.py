@@ -224,6 +224,26 @@ def test_mean_above_with_a_margin_from_hand_made_runs(tmp_path: Path) -> None:
     assert verdicts[0.051][1][0] == "holds: mean normalised AUC above DQN's minus 0.051: 0.200 against 0.250"
 
 
+def test_auc_not_below_reads_the_whole_curve(tmp_path: Path) -> None:
+    """``auc_not_below``: the interval of the difference of mean AUCs, on every env. The candidate ends where DQN does
+    on each seed (its final return is level) but starts at -10, so its AUC (the trapezoids' mean over three evaluations),
+    (3 v - 10) / 4, lies below DQN's v: the mean difference is (3 * 2.5 - 10) / 4 - 2.5 = -3.125."""
+    study_module = load_script("study")
+    root = tmp_path / "raw"
+    for env in ENVS:
+        for seed, value in zip(SEEDS, [1.0, 2.0, 3.0, 4.0], strict=True):
+            write_run(root, "toy", "dqn", env, seed, [[value, value]] * 3)
+            write_run(root, "toy", "offon_lambda_choice", env, seed, [[-10.0, -10.0], [value, value], [value, value]])
+    data = dict(STUDY, rule=[{"kind": "final_not_below", "reference": "dqn"}, {"kind": "auc_not_below", "reference": "dqn"}])
+    path = tmp_path / "toy.yml"
+    path.write_text(yaml.safe_dump(data))
+    study = study_module.Study.read(path)
+    decision, lines = study_module.verdict(study, *study_module.study_runs(study, root))
+    assert decision == "does not hold"
+    assert lines[0].startswith("holds: final return not below DQN's")
+    assert lines[1].startswith("does not hold: AUC not below DQN's") and "Acrobot-v1 (-3.12 [" in lines[1]
+
+
 def test_minmax_normalisation_and_former_run_names(tmp_path: Path) -> None:
     """``normalisation: minmax``: per env over every run of the study's algorithms (computed by hand here); runs made under
     a former name (``run_names``) count as the study's algorithm."""
