@@ -9,7 +9,7 @@ lambda 0.9, Peng's Q(lambda)); ``paper``, the paper's coin flips (``PAPER_TARGET
 columns): SB3's DQN, SB3's DQN with ``n_steps=10`` (``dqn_nstep``), or OffOnDQN with its defaults (``offon_defaults``,
 to measure what an option of OffOnDQN costs). ``--candidate offon_qrdqn`` measures the QR-DQN family instead: OffOnQRDQN
 (``--mode defaults``, its constructor's; ``projected``, the projected recursion; ``no_cache``, no cache and lambda 0.67;
-``double_q``) against ``sb3_offon.qrdqn.QRDQN`` (``--baseline qrdqn``, its default then), both with QR-DQN's default
+``double_q``; ``median``, ``lambda_choice="median"``, which OffOnDQN takes too) against ``sb3_offon.qrdqn.QRDQN`` (``--baseline qrdqn``, its default then), both with QR-DQN's default
 200 quantiles.
 ``--baseline qrdqn_nstep`` is that QR-DQN with ``n_steps=3`` (MinAtar's n): against OffOnDQN, it measures what the
 quantile critic costs next to the defaults; against OffOnQRDQN, what lambda-returns cost next to n-step returns. Tables and
@@ -152,6 +152,7 @@ MODES = {
     # OffOnQRDQN only: no cache, a horizon drawn per sample, lambda at the contraction of a 3-step return (gamma 0.99)
     "no_cache": dict(lambda_cache=False, mc_initial_prob=0.67, mc_final_prob=0.67),
     "per": dict(replay_buffer_class=PrioritizedOffOnReplayBuffer),  # prioritised replay, Rainbow's alpha 0.5, beta 0.4
+    "median": dict(lambda_choice="median"),  # a lambda per transition and refresh (sb3_offon/common/lambda_choice.py)
 }
 # --candidate: the class of the "OffOnDQN" runs, and the baseline it is measured against unless --baseline says
 CANDIDATES: dict[str, tuple[type, str]] = {"offon_dqn": (OffOnDQN, "dqn"), "offon_qrdqn": (OffOnQRDQN, "qrdqn")}
