@@ -27,7 +27,7 @@ def table_target(values):
 
 def chain(rewards):
     """One terminated episode with these rewards; its next states have ids 11, 12, ..."""
-    buffer = make_buffer()
+    buffer = make_buffer(buffer_size=max(16, len(rewards)))
     for i, reward in enumerate(rewards):
         step(buffer, [reward], [0], [11 + i], dones=[i == len(rewards) - 1])
     return buffer
@@ -72,6 +72,36 @@ def test_td_errors_of_both_signs_move_the_chosen_lambda():
     # The last transition's trace cannot go on (its lambda does not count): the mean and spread of 0.15 and 0.5
     assert cache.lam == pytest.approx(0.325)
     assert cache.lambda_spread == pytest.approx(0.175)
+
+
+def test_ties_below_float_resolution_go_to_the_middle():
+    # V = 1 everywhere, rewards 0.5 but -0.5 at step 40 (gamma 0.5): every TD error is 0 but step 40's (-1) and the
+    # last step's (-0.5: it terminates, 0.5 - 1), so G^lam is monotone in lambda and the median is lambda 0.5's; far
+    # from step 40 the weight (0.5 lam)^k falls below float64's resolution, and the small lambdas tie with the median
+    rewards = [0.5] * 45
+    rewards[39] = -0.5
+    cache = median_cache(chain(rewards), table_target({11 + i: 1.0 for i in range(45)}))
+    # G^0.5_t = V + sum_k 0.25^k delta_{t+k} = 1 - 0.25^(39 - t) [t <= 39] - 0.5 * 0.25^(44 - t) (t from 0)
+    t = np.arange(45)
+    expected = 1.0 - np.where(t <= 39, 0.25 ** np.maximum(39 - t, 0), 0.0) - 0.5 * 0.25 ** (44 - t)
+    np.testing.assert_allclose(by_slot(cache), expected, rtol=1e-6)
+    assert cache.lam == 0.5 and cache.lambda_spread == 0.0
+
+
+def test_cut_traces_do_not_count_in_the_logged_lambdas():
+    # Watkins's cut (delta2 = 1) after the non-greedy action of step 2 (action 1; greedy 0): the trace of step 1 stops
+    # there, and lambda does not change its return. The others as in the test above with rewards 0, 0, 8: chosen 0.15
+    # and 0.5, so the mean and spread of those two alone
+    buffer = make_buffer()
+    for i, (reward, action) in enumerate(zip([1.0, 0.0, 0.0, 8.0], [0, 1, 0, 0], strict=True)):
+        step(buffer, [reward], [action], [11 + i], dones=[i == 3])
+    cache = median_cache(buffer, table_target({12: 3.0, 13: -4.0}), qlearning_prob=1.0)
+    assert cache.lam == pytest.approx(0.325) and cache.lambda_spread == pytest.approx(0.175)
+
+
+def test_a_refresh_where_no_trace_goes_on_logs_the_middle():
+    cache = median_cache(chain([1.0]), table_target({}))
+    assert cache.lam == 0.5 and cache.lambda_spread == 0.0
 
 
 def varied_buffer(n_steps=1, seed=0):
@@ -122,6 +152,25 @@ def test_own_lambdas_draw_the_shared_horizons_when_they_are_equal(n_steps):
     np.testing.assert_allclose(own, shared, rtol=1e-12, atol=1e-12)
 
 
+@pytest.mark.parametrize("n_steps", [1, 3])
+def test_each_transition_walks_its_own_lambdas_trace(n_steps):
+    # Lambdas drawn per transition from the grid: the transitions of each lambda get the targets that the shared draw
+    # gives with that lambda for all, on the same uniforms (blocks of 4 cut traces too)
+    buffer = varied_buffer(n_steps, seed=4)
+    np.random.seed(7)
+    layout = lambda_layout(buffer, 10, 4, GAMMA, False)
+    next_quantiles, greedy = fake_quantiles(layout.inputs["next_observations"])
+    trace = layout.trace(greedy, 0.5)
+    lambdas = np.random.default_rng(0).choice(MEDIAN_GRID, size=len(layout.slots))
+    own = quantile_lambda_returns._sampled_targets_of_own_lambdas(
+        layout, next_quantiles, lambdas, trace, np.random.default_rng(11)
+    )
+    for lam in np.unique(lambdas):
+        shared = quantile_lambda_returns._sampled_targets(layout, next_quantiles, lam * trace, np.random.default_rng(11))
+        mine = lambdas == lam
+        np.testing.assert_allclose(own[mine], shared[mine], rtol=1e-12, atol=1e-12)
+
+
 def test_the_quantile_critic_chooses_on_the_mean_and_draws_each_transitions_own_horizon():
     buffer = varied_buffer(n_steps=1, seed=2)
     scalar = median_cache(buffer, fake_values, qlearning_prob=0.5)  # the rule on the atoms' mean
@@ -160,6 +209,14 @@ def test_models_log_the_chosen_lambdas_and_keep_the_choice_on_load(algo, tmp_pat
     loaded = algo.load(tmp_path / "model", env=model.get_env())
     assert loaded.lambda_choice == "median"
     loaded.learn(200)
+
+
+@pytest.mark.parametrize("algo", [OffOnDQN, OffOnQRDQN])
+def test_a_model_saved_before_the_choice_existed_loads_with_a_fixed_lambda(algo, tmp_path):
+    model = algo("MlpPolicy", "CartPole-v1", seed=0, **SMALL)
+    del model.lambda_choice  # as a model saved by a version without the argument
+    model.save(tmp_path / "model")
+    assert algo.load(tmp_path / "model").lambda_choice == "fixed"
 
 
 @pytest.mark.parametrize("algo", [OffOnDQN, OffOnQRDQN])

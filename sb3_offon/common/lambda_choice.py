@@ -6,16 +6,17 @@ read-back), for OffOnDQN (``mc_mixing="lambda"``) and OffOnQRDQN alike.
 ``"median"``, DQN(lambda)'s dynamic return (Daley & Amato 2019; ``DynamicLambdaReplayMemory`` in their code, never
 published with figures): per transition, the lambda-returns for lambda = 0, 0.05, ..., 1 (21 of them, with the same
 windows, trace cuts and bootstraps as a fixed lambda's), and the one whose value is their median. The target is one of
-those returns, so the rule has no bound and no scale: it serves returns of 500 and of 20 alike. The chosen lambda is
-the one whose return is the median (where several lambdas give the same return, as where the trace cannot go on, the
-middle of the grid among them).
+those returns, so the rule has no bound and no scale: it serves returns of 500 and of 20 alike. The chosen lambda is the
+one whose return is the median (where several lambdas give that same return, as where the trace cannot go on, or returns
+within float rounding of it, the one of them nearest the middle of the grid). The logged mean and spread count the
+transitions where lambda changes the return: those whose trace can go on, with a weight c above 0.
 
 What it does, read from the returns: with Peng's trace (c = 1), G^lam_t - V(s_t) = sum_k (gamma lam)^k delta_{t+k}, the
 TD errors delta along the trace, a polynomial in lambda with those coefficients. Where the TD errors along the trace
 share a sign (a critic that is off in one direction, as early in training), G^lam is monotone in lambda and its median
-over the grid is lambda = 0.5 exactly; the rule moves away from 0.5 only where the TD errors disagree in sign, towards
-the lambda whose return sits between the others. It is robust, not horizon-seeking: it does not reach for lambda 0.9
-where long horizons would pay.
+over the grid is lambda = 0.5's (the tie rule above absorbs the recurrence's rounding); the rule moves away from 0.5
+only where the TD errors disagree in sign, towards the lambda whose return sits between the others. It is robust, not
+horizon-seeking: it does not reach for lambda 0.9 where long horizons would pay.
 
 For OffOnQRDQN the rule is applied to the law's mean (the scalar lambda-returns of the mean of the target atoms at the
 bootstrap action), and each transition's distributional target is then its chosen lambda's, in the sampled form
@@ -30,6 +31,8 @@ import numpy as np
 LAMBDA_CHOICES = ("fixed", "median")
 # The lambdas the median rule chooses among (DQN(lambda)'s grid)
 MEDIAN_GRID = np.linspace(0.0, 1.0, 21)
+# Returns within this share of their magnitude are tied: a recurrence's rounding, not lambda, tells them apart
+TIE_TOLERANCE = 1e-9
 
 
 @dataclass
@@ -56,19 +59,23 @@ def choose_lambda(
 
     :param choice: a rule of :data:`LAMBDA_CHOICES` other than ``"fixed"``
     :param returns_of: maps K lambdas, shaped (K, 1, 1), to the scalar lambda-returns of each, shaped (K, transitions)
-    :param goes_on: per transition, whether its trace can go on past its first window (else lambda does not matter)
+    :param goes_on: per transition, whether its trace can go on past its first window with a weight above 0 (else
+        lambda does not matter, and its lambda is not counted in the mean and spread)
     :return: the chosen returns (transitions,) as float64, and the chosen lambdas
     """
     if choice != "median":
         raise ValueError(f"`lambda_choice` must be one of {LAMBDA_CHOICES}, got {choice!r}")
     grid = MEDIAN_GRID
     returns = returns_of(grid[:, None, None])  # (K, transitions)
-    # The stable sort keeps tied returns in grid order, so where lambda does not matter the middle lambda is chosen
-    order = np.argsort(returns, axis=0, kind="stable")
-    picked = order[len(grid) // 2]
     columns = np.arange(returns.shape[1])
+    median = returns[np.argsort(returns, axis=0)[len(grid) // 2], columns]
+    # Among the lambdas whose return is the median (several where returns tie: lambda does not matter there, or its
+    # effect is below the rounding of the recurrence, which can also order tied returns at random by an ulp), the one
+    # nearest the middle of the grid
+    tied = np.abs(returns - median) <= TIE_TOLERANCE * np.abs(returns).max(axis=0)
+    picked = np.argmin(np.where(tied, np.abs(grid - 0.5)[:, None], np.inf), axis=0)
     values = grid[picked]
     counted = values[goes_on]
     mean = float(counted.mean()) if len(counted) else float(grid[len(grid) // 2])
     spread = float(counted.std()) if len(counted) else 0.0
-    return returns[picked, columns], ChosenLambdas(values=values, mean=mean, spread=spread)
+    return median, ChosenLambdas(values=values, mean=mean, spread=spread)

@@ -335,7 +335,7 @@ def compute_lambda_returns(
         def returns_of(lambdas: np.ndarray) -> np.ndarray:
             return scalar_lambda_returns(layout, next_values, trace, lambdas)
 
-        returns, chosen = choose_lambda(choice, returns_of, layout.goes_on[layout.valid])
+        returns, chosen = choose_lambda(choice, returns_of, (layout.goes_on & (trace > 0))[layout.valid])
     return LambdaReturnCache(
         slots=layout.slots,
         envs=layout.envs,

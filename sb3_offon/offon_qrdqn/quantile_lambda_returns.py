@@ -105,7 +105,7 @@ def compute_quantile_lambda_returns(
         def returns_of(lambdas: np.ndarray) -> np.ndarray:
             return scalar_lambda_returns(layout, next_means, trace, lambdas)
 
-        _, chosen = choose_lambda(choice, returns_of, layout.goes_on[layout.valid])
+        _, chosen = choose_lambda(choice, returns_of, (layout.goes_on & (trace > 0))[layout.valid])
         atoms = _sampled_targets_of_own_lambdas(layout, next_quantiles, chosen.values, trace, rng)
     elif form == "sampled":
         assert rng is not None
