@@ -33,9 +33,9 @@ def chain(rewards):
     return buffer
 
 
-def median_cache(buffer, target, qlearning_prob=0.0, block_size=100, n_wanted=10**9):
+def median_cache(buffer, target, qlearning_prob=0.0, block_size=100, n_wanted=10**9, choice="median", lam=0.9):
     return compute_lambda_returns(
-        buffer, target, n_wanted, block_size, GAMMA, 0.9, qlearning_prob, False, key=0, choice="median"
+        buffer, target, n_wanted, block_size, GAMMA, lam, qlearning_prob, False, key=0, choice=choice
     )
 
 
@@ -104,11 +104,69 @@ def test_a_refresh_where_no_trace_goes_on_logs_the_middle():
     assert cache.lam == 0.5 and cache.lambda_spread == 0.0
 
 
-def varied_buffer(n_steps=1, seed=0):
+def test_persistent_td_errors_give_a_long_horizon():
+    # V = 0 at every state the episode visits (the terminal one's 100 is never used), rewards 1, 2, 3, 5, 4,
+    # terminated: delta_t = r_t for t >= 1 (V(s_t) = 0, nothing after the last). Pairs (delta_t, delta_t+1) where the
+    # trace of t goes on: (2, 3), (3, 5), (5, 4); their correlation: centred x (-4/3, -1/3, 5/3), y (-1, 1, 0):
+    # 1 / sqrt(42/9 * 2) = 0.32733
+    buffer = chain([1.0, 2.0, 3.0, 5.0, 4.0])
+    target = table_target({15: 100.0})
+    cache = median_cache(buffer, target, choice="autocorrelation")
+    assert cache.lam == pytest.approx(1.0 / np.sqrt(84.0 / 9.0)) and cache.lambda_spread is None
+    fixed = compute_lambda_returns(buffer, target, 10**9, 100, GAMMA, cache.lam, 0.0, False, key=0)
+    np.testing.assert_array_equal(by_slot(cache), by_slot(fixed))
+
+
+def test_neighbouring_td_errors_of_n_step_windows():
+    # n_steps = 2, V = 0: the TD error of window t is its discounted reward R_t = r_t + 0.5 r_{t+1} (r_t alone for the
+    # last, cut short by the termination), defined where window t - 2 precedes it in the episode; pairs (t, t + 2) where
+    # the trace of t goes on (window t + 2 exists). Written out here, apart from the layout's arrays
+    rewards = [0.0, 1.0, 1.0, 2.0, 3.0, 5.0, 8.0, 6.0, 9.0]
+    buffer = make_buffer(buffer_size=16, n_steps=2)
+    for i, reward in enumerate(rewards):
+        step(buffer, [reward], [0], [11 + i], dones=[i == len(rewards) - 1])
+    last = len(rewards) - 1
+    windows = [rewards[t] + (GAMMA * rewards[t + 1] if t < last else 0.0) for t in range(len(rewards))]
+    pairs = [(windows[t], windows[t + 2]) for t in range(2, last - 1)]
+    expected = np.corrcoef(np.array(pairs).T)[0, 1]
+    assert 0.0 < expected < 1.0
+    cache = median_cache(buffer, table_target({}), choice="autocorrelation")
+    assert cache.lam == pytest.approx(expected)
+
+
+def test_td_errors_that_change_sign_give_lambda_zero():
+    # Rewards 1, 2, 0, 3, 1, V(after step i) = 2, 1, 4, 0 (gamma 0.5): delta_1 = 2 + 0.5 - 2 = 0.5, delta_2 = 0 + 2 - 1 = 1,
+    # delta_3 = 3 + 0 - 4 = -1, delta_4 = 1 - 0 = 1 (terminated); pairs (0.5, 1), (1, -1), (-1, 1): correlation
+    # (-5/3) / sqrt(13/6 * 8/3) = -0.693, clipped to 0: the one-step targets
+    target = table_target({11: 2.0, 12: 1.0, 13: 4.0, 14: 0.0})
+    cache = median_cache(chain([1.0, 2.0, 0.0, 3.0, 1.0]), target, choice="autocorrelation")
+    assert cache.lam == 0.0
+    np.testing.assert_allclose(by_slot(cache), [1.0 + 0.5 * 2.0, 2.0 + 0.5 * 1.0, 0.0 + 0.5 * 4.0, 3.0 + 0.0, 1.0])
+
+
+def test_a_refresh_without_pairs_keeps_delta1():
+    cache = median_cache(chain([1.0, 2.0]), table_target({}), choice="autocorrelation", lam=0.8)
+    assert cache.lam == 0.8  # one pair at most (none here: the first transition has no predecessor)
+
+
+@pytest.mark.parametrize("form", ["sampled", "projected"])
+def test_the_quantile_critic_takes_the_refresh_lambda_of_its_mean(form):
+    buffer = varied_buffer(n_steps=3, seed=5, buffer_size=50, n_adds=80)  # enough windows 3 steps apart to pair
+    scalar = median_cache(buffer, fake_values, qlearning_prob=0.5, choice="autocorrelation")
+    arguments = (buffer, fake_quantiles, 10**9, 100, GAMMA)
+    chosen = compute_quantile_lambda_returns(
+        *arguments, 0.9, 0.5, False, key=0, form=form, rng=np.random.default_rng(0), choice="autocorrelation"
+    )
+    assert chosen.lam == scalar.lam and chosen.lam != 0.9
+    fixed = compute_quantile_lambda_returns(*arguments, chosen.lam, 0.5, False, key=0, form=form, rng=np.random.default_rng(0))
+    np.testing.assert_array_equal(chosen.returns, fixed.returns)
+
+
+def varied_buffer(n_steps=1, seed=0, buffer_size=12, n_adds=30):
     """Two envs of different episode lengths, cut and terminated episodes, non-greedy actions, a ring that wraps."""
     rng = np.random.default_rng(seed)
-    buffer = make_buffer(buffer_size=12, n_envs=2, n_steps=n_steps)
-    for i in range(30):
+    buffer = make_buffer(buffer_size=buffer_size, n_envs=2, n_steps=n_steps)
+    for i in range(n_adds):
         dones = [i % 5 == 4, i % 7 == 6]
         truncated = [i % 10 == 9, False]
         step(buffer, rng.normal(size=2), rng.integers(0, 5, size=2), rng.integers(1, 40, size=2), dones, truncated)
@@ -198,16 +256,19 @@ def test_the_projected_form_is_refused():
         )
 
 
-@pytest.mark.parametrize("algo", [OffOnDQN, OffOnQRDQN])
-def test_models_log_the_chosen_lambdas_and_keep_the_choice_on_load(algo, tmp_path):
-    model = algo("MlpPolicy", "CartPole-v1", lambda_choice="median", seed=0, **SMALL)
+@pytest.mark.parametrize(("algo", "choice"), [(OffOnDQN, "median"), (OffOnQRDQN, "median"), (OffOnQRDQN, "autocorrelation")])
+def test_models_log_the_chosen_lambdas_and_keep_the_choice_on_load(algo, choice, tmp_path):
+    model = algo("MlpPolicy", "CartPole-v1", lambda_choice=choice, seed=0, **SMALL)
     model.set_logger(configure(str(tmp_path / "log"), ["csv"]))
     model.learn(400)
-    logged = pd.read_csv(tmp_path / "log" / "progress.csv")[["train/lambda", "train/lambda_std"]].dropna()
-    assert len(logged) and logged["train/lambda"].between(0, 1).all() and (logged["train/lambda_std"] >= 0).all()
+    progress = pd.read_csv(tmp_path / "log" / "progress.csv")
+    logged = progress["train/lambda"].dropna()
+    assert len(logged) and logged.between(0, 1).all()
+    # A spread per transition where the rule chooses per transition; one lambda a refresh otherwise
+    assert ("train/lambda_std" in progress.columns) == (choice == "median")
     model.save(tmp_path / "model")
     loaded = algo.load(tmp_path / "model", env=model.get_env())
-    assert loaded.lambda_choice == "median"
+    assert loaded.lambda_choice == choice
     loaded.learn(200)
 
 
@@ -236,6 +297,8 @@ def test_a_fixed_lambda_logs_no_spread(algo, tmp_path):
         (OffOnQRDQN, dict(lambda_choice="mean"), "`lambda_choice` must be one of"),
         (OffOnQRDQN, dict(lambda_choice="median", lambda_form="projected"), "lambda_form='sampled'"),
         (OffOnQRDQN, dict(lambda_choice="median", lambda_cache=False), "lambda_cache=True"),
+        (OffOnQRDQN, dict(lambda_choice="autocorrelation", lambda_cache=False), "lambda_cache=True"),
+        (OffOnDQN, dict(lambda_choice="autocorrelation", mc_mixing="max"), "needs `mc_mixing='lambda'`"),
     ],
 )
 def test_bad_choices_are_refused(algo, kwargs, message):

@@ -18,17 +18,32 @@ over the grid is lambda = 0.5's (the tie rule above absorbs the recurrence's rou
 only where the TD errors disagree in sign, towards the lambda whose return sits between the others. It is robust, not
 horizon-seeking: it does not reach for lambda 0.9 where long horizons would pay.
 
-For OffOnQRDQN the rule is applied to the law's mean (the scalar lambda-returns of the mean of the target atoms at the
+``"autocorrelation"``, one lambda per refresh: the lag-one correlation of the TD errors along the refresh's traces,
+clipped to [0, 1] (:func:`td_error_autocorrelation`). A heuristic of this package, not a published rule, and scale-free
+(a correlation). The reasoning: an error of the critic that bootstrapping carries from state to state shows as TD
+errors that persist along a trajectory, in sign and size (a correlation near 1: early CartPole-v1, whose values are
+too low everywhere), and a longer horizon is what corrects it; TD errors that come from noise do not persist (reward or
+transition noise: near 0; noise of the critic between neighbouring states: negative), and bootstrapping early, a short
+horizon, averages them out. Where a refresh has fewer than two pairs of neighbouring TD errors, or no spread, it keeps
+delta1. Both forms of OffOnQRDQN take it, as they take a fixed lambda.
+
+For OffOnQRDQN the rules are applied to the law's mean (the scalar lambda-returns of the mean of the target atoms at the
 bootstrap action), and each transition's distributional target is then its chosen lambda's, in the sampled form
 (:mod:`sb3_offon.offon_qrdqn.quantile_lambda_returns`).
 """
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-LAMBDA_CHOICES = ("fixed", "median")
+if TYPE_CHECKING:  # lambda_returns imports this module
+    from sb3_offon.common.lambda_returns import LambdaLayout
+
+LAMBDA_CHOICES = ("fixed", "median", "autocorrelation")
+# The rules that choose one lambda for a whole refresh (the others choose one per transition)
+PER_REFRESH_CHOICES = ("autocorrelation",)
 # The lambdas the median rule chooses among (DQN(lambda)'s grid)
 MEDIAN_GRID = np.linspace(0.0, 1.0, 21)
 # Returns within this share of their magnitude are tied: a recurrence's rounding, not lambda, tells them apart
@@ -79,3 +94,48 @@ def choose_lambda(
     mean = float(counted.mean()) if len(counted) else float(grid[len(grid) // 2])
     spread = float(counted.std()) if len(counted) else 0.0
     return median, ChosenLambdas(values=values, mean=mean, spread=spread)
+
+
+def refresh_lambda(choice: str, layout: "LambdaLayout", next_values: np.ndarray, trace: np.ndarray, fallback: float) -> float:
+    """
+    The lambda that a per-refresh rule (:data:`PER_REFRESH_CHOICES`) chooses for a whole refresh.
+
+    :param choice: the rule
+    :param layout: the refresh's transitions (:func:`sb3_offon.common.lambda_returns.lambda_layout`)
+    :param next_values: V(s_next) per transition (the atoms' mean for a distributional critic)
+    :param trace: (padded) c per transition
+    :param fallback: the lambda to keep where the refresh cannot measure its statistic (delta1)
+    """
+    if choice != "autocorrelation":
+        raise ValueError(f"`lambda_choice` {choice!r} does not choose one lambda per refresh")
+    correlation = td_error_autocorrelation(layout, next_values, trace)
+    return fallback if correlation is None else float(np.clip(correlation, 0.0, 1.0))
+
+
+def td_error_autocorrelation(layout: "LambdaLayout", next_values: np.ndarray, trace: np.ndarray) -> float | None:
+    """
+    The correlation of neighbouring TD errors along the refresh's traces, pooled over its blocks.
+
+    The TD error of a transition t whose predecessor (the transition ``stride`` steps earlier, in the same block and
+    episode) gives V(s_t) is delta_t = R_t + D_t V(s_next) - V(s_t): R_t and D_t the window's discounted reward and
+    discount, V(s_next) 0 where no value follows, V(s_t) the predecessor's V(s_next). The pairs (delta_t, delta_{t+stride})
+    are taken where the trace of t goes on (in the block, the episode going on, c above 0), as the lambda-return
+    weighs them.
+
+    :return: their Pearson correlation, or None with fewer than two pairs or no spread on a side
+    """
+    stride = layout.stride
+    values = layout.padded(next_values.astype(np.float64))
+    after = layout.padded(np.where(layout.no_value_after, 0.0, next_values).astype(np.float64))
+    rewards = layout.padded(layout.inputs["rewards"].astype(np.float64))
+    discounts = layout.padded(layout.inputs["discounts"], fill=1.0)
+    goes_on = layout.goes_on & (trace > 0)
+    errors = np.zeros(layout.valid.shape)
+    has_error = np.zeros(layout.valid.shape, dtype=bool)
+    has_error[:, stride:] = layout.goes_on[:, :-stride]  # the predecessor's episode went on into t
+    errors[:, stride:] = rewards[:, stride:] + discounts[:, stride:] * after[:, stride:] - values[:, :-stride]
+    paired = has_error[:, :-stride] & goes_on[:, :-stride]
+    first, second = errors[:, :-stride][paired], errors[:, stride:][paired]
+    if len(first) < 2 or np.ptp(first) == 0.0 or np.ptp(second) == 0.0:
+        return None
+    return float(np.corrcoef(first, second)[0, 1])

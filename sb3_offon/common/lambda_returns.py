@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from sb3_offon.common.buffers import OffOnBufferMixin
-from sb3_offon.common.lambda_choice import choose_lambda
+from sb3_offon.common.lambda_choice import PER_REFRESH_CHOICES, choose_lambda, refresh_lambda
 
 # Maps a batch of next observations (normalised, in the buffer's layout) to (max_a Q_target(s', a), argmax_a) as NumPy
 TargetValueFn = Callable[[Any], tuple[np.ndarray, np.ndarray]]
@@ -322,13 +322,15 @@ def compute_lambda_returns(
     :param key: the refresh key to store
     :param env: the VecNormalize wrapper, if any, to normalise observations and rewards with
     :param choice: ``"fixed"``: ``lam`` for every transition; otherwise a rule of :mod:`sb3_offon.common.lambda_choice`
-        that chooses a lambda per transition (``lam`` unused)
+        that chooses a lambda per transition (``lam`` unused) or one per refresh (``lam`` where it cannot choose)
     """
     layout = lambda_layout(buffer, n_wanted, block_size, gamma, cut_is_terminal, env)
     next_values, greedy_actions = target_values(layout.inputs["next_observations"])
     trace = layout.trace(greedy_actions, qlearning_prob)  # c_{t+1} (c_{t+n} with n-step windows)
     chosen = None
-    if choice == "fixed":
+    if choice in PER_REFRESH_CHOICES:
+        lam = refresh_lambda(choice, layout, next_values, trace, fallback=lam)
+    if choice == "fixed" or choice in PER_REFRESH_CHOICES:
         returns = scalar_lambda_returns(layout, next_values, trace, lam)
     else:
 

@@ -222,7 +222,9 @@ class OffOnDQN(
     :param lambda_choice: ``mc_mixing="lambda"``: ``"fixed"`` (default), lambda is delta1 for every transition;
         ``"median"``, a lambda per transition chosen at each refresh from the data (DQN(lambda)'s dynamic return: the
         median of the lambda-returns for lambda = 0, 0.05, ..., 1; :mod:`sb3_offon.common.lambda_choice`), delta1 then
-        unused. The chosen lambdas' mean and standard deviation are logged as ``train/lambda`` and ``train/lambda_std``
+        unused; ``"autocorrelation"``, one lambda per refresh, the lag-one correlation of the TD errors along the
+        traces, clipped to [0, 1] (delta1 where it cannot be measured). The chosen lambdas' mean (``train/lambda``) and,
+        per transition, their standard deviation (``train/lambda_std``) are logged
     :param double_q: double Q-learning in every bootstrap (see above): the online network picks the action, the target
         network values it. Default False (DQN's max over the target network)
     :param non_finite: what a non-finite reward does: ``"raise"`` (default) a ``NonFiniteError`` naming the env and step,

@@ -10,6 +10,7 @@ from stable_baselines3.common.utils import LinearSchedule
 
 from sb3_offon.common.buffers import OffOnBufferMixin
 from sb3_offon.common.chunks import ChunkedMinibatchesMixin
+from sb3_offon.common.lambda_choice import PER_REFRESH_CHOICES
 from sb3_offon.common.lambda_horizons import sample_horizon_returns
 from sb3_offon.common.lambda_refresh import LambdaRefreshMixin
 from sb3_offon.common.lambda_returns import LambdaReturnCache
@@ -134,8 +135,10 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
     :param lambda_choice: ``"fixed"`` (default), lambda is delta1 for every transition; ``"median"``, a lambda per
         transition chosen at each refresh from the data (DQN(lambda)'s dynamic return, applied to the mean of the
         target atoms: :mod:`sb3_offon.common.lambda_choice`), delta1 then unused; the transition's target is its chosen
-        lambda's sampled horizon. Needs the cache and the sampled form. The chosen lambdas' mean and standard deviation
-        are logged as ``train/lambda`` and ``train/lambda_std``
+        lambda's sampled horizon (the cache and the sampled form only); ``"autocorrelation"``, one lambda per refresh, the
+        lag-one correlation of the TD errors of the atoms' mean along the traces, clipped to [0, 1] (delta1 where it
+        cannot be measured; the cache only). The chosen lambdas' mean (``train/lambda``) and, per transition, their
+        standard deviation (``train/lambda_std``) are logged
     :param non_finite: what a non-finite reward does: ``"raise"`` (default) a ``NonFiniteError`` naming the env and step,
         nothing of that step stored; ``"skip"`` a warning, the step's transitions not stored and the running episodes
         cut there as truncations. A non-finite loss always raises (:mod:`sb3_offon.common.non_finite`)
@@ -275,10 +278,15 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
             except ValueError as error:
                 raise ValueError(f"{error}{f' ({what})' if what else ''}") from None
         self._check_lambda_cache()
-        if self.lambda_choice != "fixed" and (self.lambda_form != "sampled" or not self.lambda_cache):
+        if self.lambda_choice != "fixed" and not self.lambda_cache:
             raise ValueError(
-                f"`lambda_choice` {self.lambda_choice!r} chooses a lambda per transition at each refresh of the cache and "
-                "draws its horizon: it needs `lambda_cache=True` and `lambda_form='sampled'`"
+                f"`lambda_choice` {self.lambda_choice!r} chooses lambda at each refresh of the cache: it needs "
+                "`lambda_cache=True`"
+            )
+        if self.lambda_choice not in ("fixed", *PER_REFRESH_CHOICES) and self.lambda_form != "sampled":
+            raise ValueError(
+                f"`lambda_choice` {self.lambda_choice!r} chooses a lambda per transition and draws its horizon: it needs "
+                "`lambda_form='sampled'`"
             )
         if not isinstance(self.sarsa_target, str):
             raise ValueError(f"`sarsa_target` must be a string, got {self.sarsa_target!r}")

@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from sb3_offon.common.buffers import OffOnBufferMixin
-from sb3_offon.common.lambda_choice import choose_lambda
+from sb3_offon.common.lambda_choice import PER_REFRESH_CHOICES, choose_lambda, refresh_lambda
 from sb3_offon.common.lambda_returns import (
     LambdaLayout,
     LambdaReturnCache,
@@ -86,11 +86,12 @@ def compute_quantile_lambda_returns(
     :param env: the VecNormalize wrapper, if any, to normalise observations and rewards with
     :param choice: ``"fixed"``: ``lam`` for every transition; otherwise a rule of :mod:`sb3_offon.common.lambda_choice`,
         applied to the scalar lambda-returns of the atoms' mean, that chooses a lambda per transition (``lam`` unused;
-        the sampled form only)
+        the sampled form only) or one per refresh (``lam`` where it cannot choose; both forms)
     """
     if form not in LAMBDA_FORMS:
         raise ValueError(f"`lambda_form` must be one of {LAMBDA_FORMS}, got {form!r}")
-    if choice != "fixed" and form != "sampled":
+    per_transition = choice not in ("fixed", *PER_REFRESH_CHOICES)
+    if per_transition and form != "sampled":
         raise ValueError(f"`lambda_choice` {choice!r} needs the sampled form (`lambda_form='sampled'`), got {form!r}")
     layout = lambda_layout(buffer, n_wanted, block_size, gamma, cut_is_terminal, env)
     next_quantiles, greedy_actions = target_quantiles(layout.inputs["next_observations"])
@@ -98,9 +99,12 @@ def compute_quantile_lambda_returns(
     chosen = None
     if form == "sampled" and rng is None:
         raise ValueError("the sampled form needs a generator (`rng`)")
-    if choice != "fixed":
-        assert rng is not None
-        next_means = next_quantiles.astype(np.float64).mean(axis=1)
+    next_means = None if choice == "fixed" else next_quantiles.astype(np.float64).mean(axis=1)  # the rules read the mean
+    if choice in PER_REFRESH_CHOICES:
+        assert next_means is not None
+        lam = refresh_lambda(choice, layout, next_means, trace, fallback=lam)
+    if per_transition:
+        assert rng is not None and next_means is not None
 
         def returns_of(lambdas: np.ndarray) -> np.ndarray:
             return scalar_lambda_returns(layout, next_means, trace, lambdas)
