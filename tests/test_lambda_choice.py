@@ -134,6 +134,37 @@ def test_neighbouring_td_errors_of_n_step_windows():
     assert cache.lam == pytest.approx(expected)
 
 
+def test_td_errors_across_episodes_and_cut_traces_written_out():
+    # n_steps = 2, gamma 0.5, V(s) = a table over the next states' ids, greedy action 0 everywhere and Watkins's cut
+    # (delta2 = 1): two episodes in one env, the first terminated at step 5, the second running. Written out per window
+    # t: k = min(2, steps left in its episode), R_t = sum_{j<k} 0.5^j r_{t+j}, its next state the one after step
+    # t + k - 1 (value 0 if that step terminated), delta_t = R_t + 0.5^k V(next) - V(s_t) where the window t - 2 of
+    # the same episode was full (its next state is s_t); pairs (t, t + 2) where window t + 2 is in the episode and the
+    # action recorded at its start is greedy (else c = 0)
+    rewards = [1.0, -2.0, 0.5, 3.0, 1.0, 2.0, 0.0, 4.0, -1.0, 2.5, 1.5, 0.5, 2.0, -0.5, 3.0, 1.0]
+    actions = [0, 0, 0, 0, 1, 0, 0, 0, 0, 0, 1, 0, 0, 0, 0, 0]
+    ends = {5}
+    values = {11 + i: float((7 * i) % 5 - 1.5) for i in range(len(rewards))}
+    buffer = make_buffer(buffer_size=16, n_steps=2)
+    for i, (reward, action) in enumerate(zip(rewards, actions, strict=True)):
+        step(buffer, [reward], [action], [11 + i], dones=[i in ends])
+    episodes = [range(0, 6), range(6, len(rewards))]
+    errors, pairs = {}, []
+    for episode in episodes:
+        last = episode[-1]
+        last_terminates = last in ends
+        for t in episode:
+            k = min(2, last - t + 1)
+            value = 0.0 if (t + k - 1 == last and last_terminates) else values[11 + t + k - 1]
+            if t - 2 >= episode[0]:
+                errors[t] = sum(0.5**j * rewards[t + j] for j in range(k)) + 0.5**k * value - values[11 + t - 1]
+        pairs += [(errors[t], errors[t + 2]) for t in episode if t in errors and t + 2 <= last and actions[t + 2] == 0]
+    expected = np.corrcoef(np.array(pairs).T)[0, 1]
+    cache = median_cache(buffer, table_target(values), qlearning_prob=1.0, choice="autocorrelation")
+    assert len(pairs) >= 3 and cache.lam == pytest.approx(float(np.clip(expected, 0.0, 1.0)))
+    assert 0.0 < cache.lam < 1.0
+
+
 def test_td_errors_that_change_sign_give_lambda_zero():
     # Rewards 1, 2, 0, 3, 1, V(after step i) = 2, 1, 4, 0 (gamma 0.5): delta_1 = 2 + 0.5 - 2 = 0.5, delta_2 = 0 + 2 - 1 = 1,
     # delta_3 = 3 + 0 - 4 = -1, delta_4 = 1 - 0 = 1 (terminated); pairs (0.5, 1), (1, -1), (-1, 1): correlation
@@ -147,6 +178,38 @@ def test_td_errors_that_change_sign_give_lambda_zero():
 def test_a_refresh_without_pairs_keeps_delta1():
     cache = median_cache(chain([1.0, 2.0]), table_target({}), choice="autocorrelation", lam=0.8)
     assert cache.lam == 0.8  # one pair at most (none here: the first transition has no predecessor)
+
+
+def skewed_quantiles(next_observations):
+    """Atoms id - 1, id, 1.5 id: their mean, (2.5 id - 1) / 3, is not their median (id) plus a constant."""
+    ids = np.asarray(next_observations, dtype=np.float64).reshape(-1)
+    return np.stack([ids - 1.0, ids, 1.5 * ids], axis=1).astype(np.float32), ids.astype(np.int64) % 5
+
+
+def skewed_means(next_observations):
+    quantiles, actions = skewed_quantiles(next_observations)
+    return quantiles.mean(axis=1), actions
+
+
+def test_the_refresh_lambda_reads_the_atoms_mean():
+    # One long episode through states 11, 12, ... with noisy rewards: TD errors with a trend (the atoms' mean grows
+    # along it) and noise, so a correlation strictly between 0 and 1 that the atoms' median would not give
+    buffer = chain(list(np.random.default_rng(6).normal(size=30)))
+    scalar = median_cache(buffer, skewed_means, qlearning_prob=0.5, choice="autocorrelation")
+    chosen = compute_quantile_lambda_returns(
+        buffer,
+        skewed_quantiles,
+        10**9,
+        100,
+        GAMMA,
+        0.9,
+        0.5,
+        False,
+        key=0,
+        rng=np.random.default_rng(0),
+        choice="autocorrelation",
+    )
+    assert chosen.lam == pytest.approx(scalar.lam) and 0.0 < chosen.lam < 1.0
 
 
 @pytest.mark.parametrize("form", ["sampled", "projected"])
@@ -256,7 +319,10 @@ def test_the_projected_form_is_refused():
         )
 
 
-@pytest.mark.parametrize(("algo", "choice"), [(OffOnDQN, "median"), (OffOnQRDQN, "median"), (OffOnQRDQN, "autocorrelation")])
+@pytest.mark.parametrize(
+    ("algo", "choice"),
+    [(OffOnDQN, "median"), (OffOnDQN, "autocorrelation"), (OffOnQRDQN, "median"), (OffOnQRDQN, "autocorrelation")],
+)
 def test_models_log_the_chosen_lambdas_and_keep_the_choice_on_load(algo, choice, tmp_path):
     model = algo("MlpPolicy", "CartPole-v1", lambda_choice=choice, seed=0, **SMALL)
     model.set_logger(configure(str(tmp_path / "log"), ["csv"]))
