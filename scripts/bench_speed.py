@@ -9,8 +9,8 @@ lambda 0.9, Peng's Q(lambda)); ``paper``, the paper's coin flips (``PAPER_TARGET
 columns): SB3's DQN, SB3's DQN with ``n_steps=10`` (``dqn_nstep``), or OffOnDQN with its defaults (``offon_defaults``,
 to measure what an option of OffOnDQN costs). ``--candidate offon_qrdqn`` measures the QR-DQN family instead: OffOnQRDQN
 (``--mode defaults``, its constructor's; ``projected``, the projected recursion; ``no_cache``, no cache and lambda 0.67;
-``double_q``; ``median``, ``lambda_choice="median"``, which OffOnDQN takes too) against ``sb3_offon.qrdqn.QRDQN`` (``--baseline qrdqn``, its default then), both with QR-DQN's default
-200 quantiles.
+``double_q``; ``median``, ``lambda_choice="median"``, which OffOnDQN takes too) against ``sb3_offon.qrdqn.QRDQN``
+(``--baseline qrdqn``, its default then), both with QR-DQN's default 200 quantiles.
 ``--baseline qrdqn_nstep`` is that QR-DQN with ``n_steps=3`` (MinAtar's n): against OffOnDQN, it measures what the
 quantile critic costs next to the defaults; against OffOnQRDQN, what lambda-returns cost next to n-step returns. Tables and
 JSON keep the roles' names ("DQN" the baseline, "OffOnDQN" the candidate) and say which classes they are.
