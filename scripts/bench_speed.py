@@ -12,8 +12,10 @@ to measure what an option of OffOnDQN costs). ``--candidate offon_qrdqn`` measur
 ``double_q``; ``median``, ``lambda_choice="median"``, which OffOnDQN takes too) against ``sb3_offon.qrdqn.QRDQN``
 (``--baseline qrdqn``, its default then), both with QR-DQN's default 200 quantiles.
 ``--baseline qrdqn_nstep`` is that QR-DQN with ``n_steps=3`` (MinAtar's n): against OffOnDQN, it measures what the
-quantile critic costs next to the defaults; against OffOnQRDQN, what lambda-returns cost next to n-step returns. Tables and
-JSON keep the roles' names ("DQN" the baseline, "OffOnDQN" the candidate) and say which classes they are.
+quantile critic costs next to the defaults; against OffOnQRDQN, what lambda-returns cost next to n-step returns.
+``--hyperparams key:value ...`` adds the candidate's own arguments on top of the mode's, written as a study file or the
+command line writes them, so that any configuration a study runs can be priced. Tables and JSON keep the roles' names
+("DQN" the baseline, "OffOnDQN" the candidate) and say which classes and arguments they are.
 
 The two runs of a pair take turns in one process: each learn() runs in a thread of its own, and they hand a baton
 to each other every ``--switch-every`` env steps (from a callback), so only one of them computes at any time. A
@@ -37,6 +39,8 @@ Usage:
     python scripts/bench_speed.py --env MinAtar/Breakout-v0 --candidate offon_qrdqn --prefill 10000 --flush-denormals
     python scripts/bench_speed.py --env LunarLander-v3 --mode per --baseline offon_defaults
     python scripts/bench_speed.py --env MinAtar/Breakout-v0 --baseline qrdqn_nstep --prefill 10000 --flush-denormals
+    python scripts/bench_speed.py --env MinAtar/Breakout-v0 --candidate offon_qrdqn --baseline qrdqn_nstep \
+        --hyperparams mc_initial_prob:0.670 mc_final_prob:0.670 --train-freq 4 --prefill 10000 --flush-denormals
 
 ``--env AtariShaped`` is an Atari-shaped task made up on the spot (4 stacked 84x84 uint8 frames, episodes of 200 steps
 that end by termination, CnnPolicy, the zoo's Atari DQN settings with a smaller buffer), so that CNNs can be measured,
@@ -45,6 +49,7 @@ that the device's queued work is counted in the run that queued it.
 """
 
 import argparse
+import ast
 import gc
 import json
 import os
@@ -230,6 +235,14 @@ def parse_args() -> argparse.Namespace:
     )
     parser.add_argument("--mode", choices=sorted(MODES), default="defaults", help="OffOnDQN's targets (default: defaults)")
     parser.add_argument(
+        "--hyperparams",
+        nargs="+",
+        default=[],
+        metavar="KEY:VALUE",
+        help="the candidate's own arguments on top of --mode's, as a study file or the command line gives them "
+        "(values are Python literals: mc_initial_prob:0.670 n_steps:3 lambda_form:'projected')",
+    )
+    parser.add_argument(
         "--candidate",
         choices=sorted(CANDIDATES),
         default="offon_dqn",
@@ -252,6 +265,20 @@ def parse_args() -> argparse.Namespace:
     )
     parser.add_argument("--output", type=str, default=None, help="optional JSON path (a markdown table is written next to it)")
     return parser.parse_args()
+
+
+def parse_hyperparams(items: list[str]) -> dict:
+    """``["key:value", ...]`` as a dict, each value a Python literal (``n_steps:3``, ``lambda_form:'projected'``)."""
+    kwargs = {}
+    for item in items:
+        key, separator, value = item.partition(":")
+        if not separator or not key:
+            raise SystemExit(f"--hyperparams: {item!r} is not KEY:VALUE")
+        try:
+            kwargs[key] = ast.literal_eval(value)
+        except (ValueError, SyntaxError):
+            raise SystemExit(f"--hyperparams: the value of {key!r} ({value!r}) is not a Python literal") from None
+    return kwargs
 
 
 class Baton:
@@ -433,7 +460,8 @@ if __name__ == "__main__":
     # The baseline's and OffOnDQN's own arguments (the "DQN" columns are the baseline's, n-step DQN's with dqn_nstep)
     baseline_class, baseline_kwargs = BASELINES[args.baseline]
     classes = {"DQN": baseline_class, "OffOnDQN": candidate_class}
-    extra_kwargs = {"DQN": baseline_kwargs, "OffOnDQN": MODES[args.mode]}
+    candidate_kwargs = {**MODES[args.mode], **parse_hyperparams(args.hyperparams)}
+    extra_kwargs = {"DQN": baseline_kwargs, "OffOnDQN": candidate_kwargs}
     make_env(args.env).close()  # fail early if the env (Box2D for LunarLander) is missing
     if args.device == "cuda" and not th.cuda.is_available():
         raise SystemExit("--device cuda: no CUDA device")
@@ -454,6 +482,7 @@ if __name__ == "__main__":
         "baseline_class": baseline_class.__name__,
         "baseline_kwargs": baseline_kwargs,
         "mode": args.mode,
+        "candidate_hyperparams": parse_hyperparams(args.hyperparams),
         "candidate_class": candidate_class.__name__,
         "flush_denormals": args.flush_denormals,
         "prefill": args.prefill,
@@ -478,7 +507,7 @@ if __name__ == "__main__":
         f"{args.env}: {args.repeats} pairs of {args.timesteps} env steps, seed {args.seed}, {args.threads} thread(s), "
         f"device {args.device} ({result['device_name']})"
     )
-    print(f"hyperparams: {hyperparams}; baseline {args.baseline} {baseline_kwargs}, OffOnDQN {MODES[args.mode]}")
+    print(f"hyperparams: {hyperparams}; baseline {args.baseline} {baseline_kwargs}, OffOnDQN {candidate_kwargs}")
     print(f"load average at start: {result['loadavg_start']} ({result['cpu_count']} CPUs)")
 
     if args.warmup_timesteps > 0:

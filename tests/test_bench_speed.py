@@ -109,6 +109,22 @@ def test_tables_say_which_baseline_the_dqn_columns_are(name):
     assert table.splitlines()[4 if said else 2].startswith("| pair | order | DQN steps/s |")
 
 
+def test_the_candidates_own_arguments_are_parsed_and_shown_in_the_table():
+    """``--hyperparams`` takes a study file's ``key:value`` items, values as Python literals, and the table names them."""
+    module = load_script("bench_speed")
+    kwargs = module.parse_hyperparams(["mc_initial_prob:0.670", "n_steps:3", "lambda_form:'projected'", "lambda_cache:False"])
+    assert kwargs == {"mc_initial_prob": 0.67, "n_steps": 3, "lambda_form": "projected", "lambda_cache": False}
+    for bad in (["n_steps"], [":3"], ["lambda_form:projected"]):
+        with pytest.raises(SystemExit, match="--hyperparams"):
+            module.parse_hyperparams(bad)
+    result = json.loads((SCRIPTS.parent / "results" / "speed" / "cartpole.json").read_text())
+    plain = module.markdown_table(result).splitlines()[0]
+    result["candidate_hyperparams"] = {"mc_initial_prob": 0.67, "lambda_form": "projected"}
+    named = module.markdown_table(result).splitlines()[0]
+    assert "mc_initial_prob=0.67 lambda_form='projected'," in named
+    assert named.replace(" mc_initial_prob=0.67 lambda_form='projected'", "") == plain
+
+
 def test_every_baseline_is_named_in_the_tables():
     """A baseline added to ``--baseline`` gets a name for its tables' "DQN" columns, and the name says its class."""
     bench_speed = load_script("bench_speed")
