@@ -135,12 +135,16 @@ def final_difference(
 # ----------------------------------------------------------------------------------------------------------------------
 # The rule
 # ----------------------------------------------------------------------------------------------------------------------
+# The criteria "not below the reference on every env, by the interval of the difference", and what each compares
+NOT_BELOW_MEASURES = {"final_not_below": "final", "auc_not_below": "auc"}
+
+
 def judge_criterion(study: Study, runs: dict, scores: dict, criterion: dict, algo: str) -> tuple[bool | None, str]:
     """Whether one criterion holds for ``algo`` (None: runs missing), and a line that says why."""
     kind, reference = criterion["kind"], criterion["reference"]
     envs = list(criterion.get("envs", study.envs))
-    if kind in ("final_not_below", "auc_not_below"):
-        margin, measure = float(criterion.get("margin", 0.0)), kind.split("_")[0]
+    if kind in NOT_BELOW_MEASURES:
+        margin, measure = float(criterion.get("margin", 0.0)), NOT_BELOW_MEASURES[kind]
         return final_not_below(study, runs, scores, algo, reference, margin, envs, measure)
     if kind == "iqm_above":
         measure = criterion["measure"]

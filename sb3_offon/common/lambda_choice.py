@@ -44,6 +44,8 @@ if TYPE_CHECKING:  # lambda_returns imports this module
 LAMBDA_CHOICES = ("fixed", "median", "autocorrelation")
 # The rules that choose one lambda for a whole refresh (the others choose one per transition)
 PER_REFRESH_CHOICES = ("autocorrelation",)
+# The rules that choose one lambda per transition
+PER_TRANSITION_CHOICES = tuple(choice for choice in LAMBDA_CHOICES if choice not in ("fixed", *PER_REFRESH_CHOICES))
 # The lambdas the median rule chooses among (DQN(lambda)'s grid)
 MEDIAN_GRID = np.linspace(0.0, 1.0, 21)
 # Returns within this share of their magnitude are tied: a recurrence's rounding, not lambda, tells them apart
@@ -126,9 +128,7 @@ def td_error_autocorrelation(layout: "LambdaLayout", next_values: np.ndarray, tr
     """
     stride = layout.stride
     values = layout.padded(next_values.astype(np.float64))
-    after = layout.padded(np.where(layout.no_value_after, 0.0, next_values).astype(np.float64))
-    rewards = layout.padded(layout.inputs["rewards"].astype(np.float64))
-    discounts = layout.padded(layout.inputs["discounts"], fill=1.0)
+    after, rewards, discounts = layout.padded_value_after(next_values), layout.padded_rewards(), layout.padded_discounts()
     goes_on = layout.goes_on & (trace > 0)
     errors = np.zeros(layout.valid.shape)
     has_error = np.zeros(layout.valid.shape, dtype=bool)

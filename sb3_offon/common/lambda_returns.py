@@ -233,6 +233,18 @@ class LambdaLayout:
         result[self.valid] = values
         return result
 
+    def padded_rewards(self) -> np.ndarray:
+        """(padded, float64) R: each transition's reward, discounted over its window of k steps; 0 elsewhere."""
+        return self.padded(self.inputs["rewards"].astype(np.float64))
+
+    def padded_discounts(self) -> np.ndarray:
+        """(padded) D: gamma, or gamma^k over a window of k steps; 1 elsewhere."""
+        return self.padded(self.inputs["discounts"], fill=1.0)
+
+    def padded_value_after(self, next_values: np.ndarray) -> np.ndarray:
+        """(padded, float64) What follows a transition whose trace stops at it: V(s_next), or 0 where no value follows."""
+        return self.padded(np.where(self.no_value_after, 0.0, next_values).astype(np.float64))
+
     def trace(self, greedy_actions: np.ndarray, qlearning_prob: float) -> np.ndarray:
         """(padded) c: 1 where the action recorded after the transition's window is the greedy one, else 1 - delta2."""
         next_actions = self.inputs["next_actions"].reshape(-1)
@@ -362,13 +374,10 @@ def scalar_lambda_returns(layout: LambdaLayout, next_values: np.ndarray, trace: 
     :param lam: lambda: a float, or an array of K lambdas shaped (K, 1, 1) for the returns of each at once
     :return: float64, (transitions,), or (K, transitions) for K lambdas
     """
-    goes_on = layout.goes_on
-    tail = np.where(layout.no_value_after, 0.0, next_values)  # the value after a transition whose trace stops there
-    padded_values, padded_tail = layout.padded(next_values.astype(np.float64)), layout.padded(tail)
-    rewards = layout.padded(layout.inputs["rewards"].astype(np.float64))
-    discounts = layout.padded(layout.inputs["discounts"], fill=1.0)  # gamma, or gamma^k over a window of k steps
-    bootstrap = np.where(goes_on, (1.0 - lam * trace) * padded_values, padded_tail)
+    goes_on, discounts = layout.goes_on, layout.padded_discounts()
+    padded_values = layout.padded(next_values.astype(np.float64))
+    bootstrap = np.where(goes_on, (1.0 - lam * trace) * padded_values, layout.padded_value_after(next_values))
     returns = backward_recurrence(
-        rewards + discounts * bootstrap, np.where(goes_on, discounts * lam * trace, 0.0), stride=layout.stride
+        layout.padded_rewards() + discounts * bootstrap, np.where(goes_on, discounts * lam * trace, 0.0), stride=layout.stride
     )
     return returns[..., layout.valid]

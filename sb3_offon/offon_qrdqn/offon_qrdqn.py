@@ -10,7 +10,7 @@ from stable_baselines3.common.utils import LinearSchedule
 
 from sb3_offon.common.buffers import OffOnBufferMixin
 from sb3_offon.common.chunks import ChunkedMinibatchesMixin
-from sb3_offon.common.lambda_choice import PER_REFRESH_CHOICES
+from sb3_offon.common.lambda_choice import PER_TRANSITION_CHOICES
 from sb3_offon.common.lambda_horizons import sample_horizon_returns
 from sb3_offon.common.lambda_refresh import LambdaRefreshMixin
 from sb3_offon.common.lambda_returns import LambdaReturnCache
@@ -283,7 +283,7 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
                 f"`lambda_choice` {self.lambda_choice!r} chooses lambda at each refresh of the cache: it needs "
                 "`lambda_cache=True`"
             )
-        if self.lambda_choice not in ("fixed", *PER_REFRESH_CHOICES) and self.lambda_form != "sampled":
+        if self.lambda_choice in PER_TRANSITION_CHOICES and self.lambda_form != "sampled":
             raise ValueError(
                 f"`lambda_choice` {self.lambda_choice!r} chooses a lambda per transition and draws its horizon: it needs "
                 "`lambda_form='sampled'`"

@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from sb3_offon.common.buffers import OffOnBufferMixin
-from sb3_offon.common.lambda_choice import PER_REFRESH_CHOICES, choose_lambda, refresh_lambda
+from sb3_offon.common.lambda_choice import PER_REFRESH_CHOICES, PER_TRANSITION_CHOICES, choose_lambda, refresh_lambda
 from sb3_offon.common.lambda_returns import (
     LambdaLayout,
     LambdaReturnCache,
@@ -90,7 +90,7 @@ def compute_quantile_lambda_returns(
     """
     if form not in LAMBDA_FORMS:
         raise ValueError(f"`lambda_form` must be one of {LAMBDA_FORMS}, got {form!r}")
-    per_transition = choice not in ("fixed", *PER_REFRESH_CHOICES)
+    per_transition = choice in PER_TRANSITION_CHOICES
     if per_transition and form != "sampled":
         raise ValueError(f"`lambda_choice` {choice!r} needs the sampled form (`lambda_form='sampled'`), got {form!r}")
     layout = lambda_layout(buffer, n_wanted, block_size, gamma, cut_is_terminal, env)
@@ -152,8 +152,7 @@ def _sampled_targets(
     """
     stride = layout.stride
     goes_on = layout.goes_on & (rng.random(layout.valid.shape) < continue_prob)
-    rewards = layout.padded(layout.inputs["rewards"].astype(np.float64))
-    discounts = layout.padded(layout.inputs["discounts"], fill=1.0)
+    rewards, discounts = layout.padded_rewards(), layout.padded_discounts()
     coefficients = np.where(goes_on, discounts, 0.0)
     returns = backward_recurrence(rewards, coefficients, stride=stride)  # R_t = r_t + d_t [goes on] R_{t+s}
     # D_t = d_t where the trace stops at t, d_t D_{t+s} where it goes on
@@ -180,8 +179,7 @@ def _sampled_targets_of_own_lambdas(
     stride = layout.stride
     uniforms = rng.random(layout.valid.shape)
     rows, columns = np.nonzero(layout.valid)  # the transitions, in the order of padded[valid]
-    rewards = layout.padded(layout.inputs["rewards"].astype(np.float64))
-    discounts = layout.padded(layout.inputs["discounts"], fill=1.0)
+    rewards, discounts = layout.padded_rewards(), layout.padded_discounts()
     n_transitions = len(rows)
     returns, discount_to_stop = np.zeros(n_transitions), np.ones(n_transitions)
     stop_cells = np.zeros(n_transitions, dtype=np.int64)
@@ -207,8 +205,7 @@ def _projected_targets(layout: LambdaLayout, next_quantiles: np.ndarray, continu
     """
     stride, width = layout.stride, layout.valid.shape[1]
     stop_atoms = _stop_atoms(layout, next_quantiles)
-    rewards = layout.padded(layout.inputs["rewards"].astype(np.float64))
-    discounts = layout.padded(layout.inputs["discounts"], fill=1.0)
+    rewards, discounts = layout.padded_rewards(), layout.padded_discounts()
     targets = np.zeros_like(stop_atoms)
     for column in range(width - 1, -1, -1):
         after = stop_atoms[:, column]
