@@ -207,7 +207,7 @@ def report(study: Study, root: Path, out: Path, interim: Interim | None = None) 
     ``study`` was narrowed to (:func:`seed_subset`, :func:`env_subset`), named in the table as an interim look.
     """
     runs, scores = study_runs(study, root)
-    if study.candidates:
+    if study.candidates and study.candidate is None:  # a choice among candidates; with a `candidate`, a head-to-head
         return selection.report(study, runs, scores, out, command(study))
     out.mkdir(parents=True, exist_ok=True)
     decision, lines = verdict(study, runs, scores)

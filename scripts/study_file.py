@@ -14,7 +14,9 @@ the final return; the AUC is the mean evaluation return over training), the norm
 there), the statistics (``confidence``, ``bootstrap_reps``), and, for a study that decides something, the ``rule``
 about its ``candidate`` (its criteria: ``scripts/rule.py``). A study that chooses among ``candidates`` gives each its
 ``algo``, ``hyperparams``, ``per_env`` settings, ``envs``, ``seeds`` (else ``seeds_on`` per env, else the study's),
-``folder`` (``folder_on`` per env) and ``run_name``.
+``folder`` (``folder_on`` per env) and ``run_name``. A study with ``candidates`` and a ``candidate`` among them is a
+head-to-head of configurations: the candidate is judged by the rule against the others, wherever their runs are (a
+configuration of its own against runs of other studies' folders).
 """
 
 from dataclasses import dataclass, field
@@ -145,6 +147,6 @@ class Study:
         )
         if study.tables not in ("study", "benchmark"):
             raise ValueError(f"{path}: tables must be 'study' or 'benchmark', not {study.tables!r}")
-        if study.rule and not study.candidates and study.candidate not in study.algos:
+        if study.rule and (study.candidate is not None or not study.candidates) and study.candidate not in study.algos:
             raise ValueError(f"{path}: the candidate {study.candidate!r} is not one of the algos {study.algos}")
         return study

@@ -71,6 +71,67 @@ def test_a_rule_that_holds(tmp_path: Path) -> None:
     assert (tmp_path / "report" / "curves.png").is_file() and (tmp_path / "report" / "aggregate.png").is_file()
 
 
+def test_a_configuration_in_its_own_folder_judged_against_committed_runs(tmp_path: Path) -> None:
+    """``candidates`` with a ``candidate`` among them: a head-to-head (the verdict and table.md, not a choice), each
+    name's runs read from its own folder under its algorithm's name, the configuration's settings passed to its runs."""
+    study_module = load_script("study")
+    grid_specs = load_script("grid_specs")
+    _, root = write_study(tmp_path, {env: [3.0, 4.0, 5.0, 6.0] for env in ENVS})  # dqn's and a former candidate's runs
+    for env in ENVS:
+        for seed, value in zip(SEEDS, [2.0, 3.0, 4.0, 5.0], strict=True):
+            write_run(root, "search/horizon", "offon_qrdqn", env, seed, [[value, value]] * 3)
+    study_file = {key: value for key, value in STUDY.items() if key not in ("algos", "setup_check")}
+    study_file["candidates"] = {
+        "horizon": {"algo": "offon_qrdqn", "hyperparams": ["mc_initial_prob:0.670"], "folder": "search/horizon"},
+        "dqn": {"algo": "dqn", "folder": "toy"},
+        "offon_lambda_choice": {"algo": "offon_lambda_choice", "folder": "toy"},
+    }
+    study_file["candidate"] = "horizon"
+    study_file["also_against"] = ["offon_lambda_choice"]
+    study_file["labels"] = {"horizon": "OffOnQRDQN (lambda_3)"}
+    path = tmp_path / "judgement.yml"
+    path.write_text(yaml.safe_dump(study_file))
+    study = study_module.Study.read(path)
+    runs, scores = study_module.study_runs(study, root)
+    assert [run.seed for run in runs["CartPole-v1"]["horizon"]] == SEEDS
+    assert scores["CartPole-v1"]["horizon"]["final"].tolist() == [2.0, 3.0, 4.0, 5.0]
+    assert scores["CartPole-v1"]["offon_lambda_choice"]["final"].tolist() == [3.0, 4.0, 5.0, 6.0]
+    # Against DQN (1, 2, 3, 4): 1 above on every seed, so the rule holds; the former candidate is 1 above it, so
+    # its IQM of normalised AUC (0.35 against 0.45, as in test_a_rule_that_holds) is not above that one's
+    assert study_module.report(study, root, tmp_path / "report") == "holds"
+    table = (tmp_path / "report" / "table.md").read_text()
+    assert "**Verdict: holds.** The rule" in table and "for OffOnQRDQN (lambda_3):" in table
+    assert "- reported, not part of the rule, against Off-On λ (search's choice):" in table
+    assert "  - does not hold: IQM of normalised AUC above Off-On λ (search's choice)'s: 0.350" in table
+    assert not (tmp_path / "report" / "judgement.md").exists()  # no choice among candidates written
+    # The runner gives the configuration its settings and its folder, the others theirs
+    specs = grid_specs.candidate_specs(
+        grid_specs.argparse.Namespace(
+            study_file=study,
+            algos=["horizon"],
+            envs=ENVS,
+            seeds=SEEDS,
+            seeds_given=False,
+            set="tuned",
+            n_timesteps=None,
+            n_evals=2,
+            eval_freq=None,
+            eval_episodes=5,
+            hyperparams=[],
+            name=None,
+            run_names={},
+            device="cpu",
+            threads=1,
+            timeout=None,
+            checkpoint_freq=0,
+            root=root,
+        )
+    )
+    assert {(spec["grid"], spec["algo"], tuple(spec["hyperparams"])) for spec in specs} == {
+        ("search/horizon", "offon_qrdqn", ("mc_initial_prob:0.670",))
+    }
+
+
 def test_the_report_names_the_runs_resumed_from_a_checkpoint(tmp_path: Path) -> None:
     study_module = load_script("study")
     path, root = write_study(tmp_path, {env: [3.0, 4.0, 5.0, 6.0] for env in ENVS})
