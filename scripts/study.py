@@ -208,7 +208,9 @@ def report(study: Study, root: Path, out: Path, interim: Interim | None = None) 
     """
     runs, scores = study_runs(study, root)
     if study.candidates and study.candidate is None:  # a choice among candidates; with a `candidate`, a head-to-head
-        return selection.report(study, runs, scores, out, command(study))
+        decision = selection.report(study, runs, scores, out, command(study))
+        plot_curves(study, runs, out)
+        return decision
     out.mkdir(parents=True, exist_ok=True)
     decision, lines = verdict(study, runs, scores)
     interim_note = [interim.note(command(study)), ""] if interim else []
@@ -277,8 +279,8 @@ def plot_curves(study: Study, runs: dict, out: Path) -> None:
         for algo, kept in runs[env].items():
             grid, curves = evaluation_curves(kept)
             mean, low, high = mean_ci(curves, study.reps_iqm)
-            ax.plot(grid, mean, color=COLORS.get(algo), label=f"{study.label(algo)} ({len(kept)})")
-            ax.fill_between(grid, low, high, color=COLORS.get(algo), alpha=0.2, linewidth=0)
+            (line,) = ax.plot(grid, mean, color=COLORS.get(algo), label=f"{study.label(algo)} ({len(kept)})")
+            ax.fill_between(grid, low, high, color=line.get_color(), alpha=0.2, linewidth=0)  # the line's, if cycled
         ax.set(title=env, xlabel="Environment steps", ylabel="Evaluation return")
         ax.grid(alpha=0.3)
     axes[0][0].legend(fontsize=8)

@@ -64,6 +64,7 @@ def test_the_highest_mean_among_those_that_pass(tmp_path: Path) -> None:
     assert "| fast | fast |" in table and "| 0.789 | no: final_within |" in table
     assert "| at_the_bar | at_the_bar |" in table and table.count("| yes |") == 2
     assert "| dqn | dqn |" in table and "(reference) |" in table
+    assert (tmp_path / "out" / "curves.png").is_file()  # every candidate's learning curves beside the table
 
 
 def test_missing_runs_decide_only_what_they_cannot_change(tmp_path: Path) -> None:
