@@ -201,3 +201,103 @@ def test_learns_saves_and_loads_without_the_cache(tmp_path):
         assert th.equal(ours, theirs)
     loaded.learn(100, reset_num_timesteps=False)
     assert loaded.num_timesteps == 500 and loaded.logger.name_to_value["train/lambda"] == 0.67
+
+
+# ----------------------------------------------------------------------------------------------------------------------
+# lambda_horizon: lambda stated as a horizon, for OffOnQRDQN and OffOnDQN
+# ----------------------------------------------------------------------------------------------------------------------
+def parameters_digest(model) -> bytes:
+    return b"".join(parameter.detach().numpy().tobytes() for parameter in model.policy.parameters())
+
+
+def algo_and_settings(algo: str) -> tuple[type, dict]:
+    """The class and the small settings of the tests above (OffOnDQN's without QR-DQN's quantile count)."""
+    from sb3_offon import OffOnDQN
+
+    if algo == "offon_qrdqn":
+        return OffOnQRDQN, SMALL
+    return OffOnDQN, {key: value for key, value in SMALL.items() if key != "policy_kwargs"}
+
+
+@pytest.mark.parametrize(
+    "gamma, n_steps, horizon, expected",
+    [
+        (0.99, 1, 3, 0.0199 / 0.029701),  # (1 - 0.99^2) / (1 - 0.99^3)
+        (0.99, 1, 5, (1 - 0.96059601) / (1 - 0.9509900499)),  # 0.99^4, 0.99^5
+        (0.9, 1, 3, 0.19 / 0.271),  # (1 - 0.9^2) / (1 - 0.9^3)
+        (0.99, 3, 3, 0.0),  # one window: the 3-step target
+        # windows of 2 steps, 3 of them: (1 - g^2) / (1 - g^3) with g = 0.99^2, that is (1 - 0.99^4) / (1 - 0.99^6)
+        (0.99, 2, 6, (1 - 0.96059601) / (1 - 0.941480149401)),
+    ],
+)
+@pytest.mark.parametrize("algo", ["offon_qrdqn", "offon_dqn"])
+def test_lambda_horizon_is_lambda_for_the_whole_run(algo, gamma, n_steps, horizon, expected):
+    algo_class, settings = algo_and_settings(algo)
+    model = algo_class("MlpPolicy", "CartPole-v1", gamma=gamma, n_steps=n_steps, lambda_horizon=horizon, **settings)
+    assert model.mc_prob == pytest.approx(expected, abs=1e-12)  # before any training
+    assert model.mc_schedule(1.0) == model.mc_schedule(0.5) == model.mc_schedule(0.0) == model.mc_prob
+    assert model.mc_initial_prob == model.mc_final_prob == 0.9  # the defaults, untouched
+
+
+@pytest.mark.parametrize("algo", ["offon_qrdqn", "offon_dqn"])
+def test_lambda_horizon_trains_as_the_lambda_it_states(algo):
+    """The same run, bit for bit, as delta1 = lambda_3 passed as mc_initial_prob and mc_final_prob."""
+    algo_class, settings = algo_and_settings(algo)
+    lam = lambda_for_horizon(3, 0.99)
+    stated = algo_class("MlpPolicy", "CartPole-v1", seed=0, lambda_horizon=3, **settings)
+    stated.learn(600)
+    direct = algo_class("MlpPolicy", "CartPole-v1", seed=0, mc_initial_prob=lam, mc_final_prob=lam, **settings)
+    direct.learn(600)
+    assert stated.logger.name_to_value["train/mc_prob"] == pytest.approx(lam, abs=1e-15)
+    assert parameters_digest(stated) == parameters_digest(direct)
+    # The horizon is not ignored: the one-step target (h = 1, lambda 0) trains otherwise. (Early in a CartPole run,
+    # longer horizons, h = 5 say, can leave the same parameters: every error exceeds the Huber loss's 1, whose
+    # gradient is then its sign whatever the target.)
+    differs = algo_class("MlpPolicy", "CartPole-v1", seed=0, lambda_horizon=1, **settings)
+    differs.learn(600)
+    assert differs.mc_prob == 0.0 and parameters_digest(differs) != parameters_digest(direct)
+
+
+def test_lambda_horizon_is_saved_and_can_be_changed_on_load(tmp_path):
+    model = OffOnQRDQN("MlpPolicy", "CartPole-v1", seed=0, lambda_horizon=3, **SMALL)
+    model.learn(200)
+    model.save(tmp_path / "model")
+    loaded = OffOnQRDQN.load(tmp_path / "model", env=model.get_env())
+    assert loaded.lambda_horizon == 3 and loaded.mc_schedule(0.0) == pytest.approx(lambda_for_horizon(3, 0.99))
+    longer = OffOnQRDQN.load(tmp_path / "model", env=model.get_env(), lambda_horizon=10)
+    longer.learn(100, reset_num_timesteps=False)
+    assert longer.logger.name_to_value["train/mc_prob"] == pytest.approx(lambda_for_horizon(10, 0.99))
+    # A model saved without it (delta1 as it was) trains on delta1
+    plain = OffOnQRDQN("MlpPolicy", "CartPole-v1", seed=0, mc_initial_prob=0.5, mc_final_prob=0.5, **SMALL)
+    plain.save(tmp_path / "plain")
+    assert OffOnQRDQN.load(tmp_path / "plain").mc_schedule(0.0) == 0.5
+
+
+@pytest.mark.parametrize(
+    "options, message",
+    [
+        (dict(lambda_horizon=3, mc_initial_prob=0.5), "`mc_initial_prob`: `lambda_horizon`"),
+        (dict(lambda_horizon=3, mc_final_prob=0.0), "`mc_final_prob`: `lambda_horizon`"),
+        (dict(lambda_horizon=3, lambda_choice="median"), "`lambda_horizon`: `lambda_choice` 'median'"),
+        (dict(lambda_horizon=2, n_steps=3), r"`lambda_horizon` must be at least `n_steps` \(3"),
+        (dict(lambda_horizon=0.5), r"`lambda_horizon` must be at least `n_steps` \(1"),
+        (dict(lambda_horizon="3"), "`lambda_horizon` must be a real number"),
+        (dict(lambda_horizon=True), "`lambda_horizon` must be a real number"),
+        (dict(lambda_horizon=float("nan")), "`lambda_horizon` must be a real number"),
+    ],
+)
+@pytest.mark.parametrize("algo", ["offon_qrdqn", "offon_dqn"])
+def test_what_lambda_horizon_cannot_do_is_refused_by_name(algo, options, message):
+    algo_class, _ = algo_and_settings(algo)
+    with pytest.raises(ValueError, match=message):
+        algo_class("MlpPolicy", "CartPole-v1", **options)
+
+
+def test_lambda_horizon_needs_the_lambda_returns_in_offon_dqn():
+    from sb3_offon import PAPER_TARGETS, OffOnDQN
+
+    paper = {key: value for key, value in PAPER_TARGETS.items() if key not in ("mc_initial_prob", "mc_final_prob")}
+    with pytest.raises(
+        ValueError, match="`lambda_horizon` states the lambda of the lambda-returns: it needs `mc_mixing='lambda'`"
+    ):
+        OffOnDQN("MlpPolicy", "CartPole-v1", lambda_horizon=3, **paper)

@@ -6,6 +6,7 @@ draws. :class:`sb3_offon.OffOnDQN` and :class:`sb3_offon.OffOnQRDQN` share it; i
 class (SB3's ``DQN``, sb3-contrib's ``QRDQN``) in their bases.
 """
 
+import inspect
 import math
 import numbers
 import warnings
@@ -23,6 +24,7 @@ from sb3_offon.common.buffers import (
     OffOnReplayBuffer,
 )
 from sb3_offon.common.lambda_choice import LAMBDA_CHOICES
+from sb3_offon.common.lambda_horizons import lambda_for_horizon
 
 MC_TRUNCATION_OPTIONS = ("bootstrap", "terminal", "drop")
 
@@ -102,12 +104,55 @@ def check_lambda_arguments(model: Any) -> None:
     # getattr: models saved before double_q existed load without it (and train as before, without double Q)
     if not isinstance(getattr(model, "double_q", False), (bool, np.bool_)):
         raise ValueError(f"`double_q` must be True or False, got {model.double_q!r}")
+    check_lambda_horizon(model)
     for name, allow_none in (("lambda_block_size", False), ("lambda_refresh_interval", True)):
         value = getattr(model, name)
         if allow_none and value is None:
             continue
         if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral) or value < 1:
             raise ValueError(f"`{name}` must be a positive integer{' or None' if allow_none else ''}, got {value!r}")
+
+
+def check_lambda_horizon(model: Any) -> None:
+    """
+    ``lambda_horizon``: None, or a real number of env steps at least ``n_steps`` (a window's length), with delta1's
+    schedule (``mc_initial_prob``, ``mc_final_prob``) at the constructor's defaults and ``lambda_choice="fixed"``: the
+    horizon states lambda for the whole run, and a second statement of it would be ambiguous.
+
+    :raises ValueError: naming the bad parameter
+    """
+    if model.lambda_horizon is None:
+        return
+    horizon = real_number("lambda_horizon", model.lambda_horizon)
+    if not horizon >= model.n_steps:
+        raise ValueError(
+            f"`lambda_horizon` must be at least `n_steps` ({model.n_steps}: a window's length), got {model.lambda_horizon!r}"
+        )
+    defaults = inspect.signature(type(model).__init__).parameters
+    for name in ("mc_initial_prob", "mc_final_prob"):
+        if getattr(model, name) != defaults[name].default:
+            raise ValueError(
+                f"`{name}`: `lambda_horizon` ({model.lambda_horizon!r}) states lambda for the whole run; leave "
+                "`mc_initial_prob` and `mc_final_prob` at their defaults, or pass lambda through them instead"
+            )
+    if model.lambda_choice != "fixed":
+        raise ValueError(
+            f"`lambda_horizon`: `lambda_choice` {model.lambda_choice!r} chooses lambda itself; use `lambda_choice='fixed'`"
+        )
+
+
+def delta1_bounds(model: Any) -> tuple[float, float]:
+    """
+    delta1's (lambda's) start and end: ``mc_initial_prob`` and ``mc_final_prob``, or with ``lambda_horizon`` = h the
+    lambda whose return contracts like an h-step return with the model's ``gamma``, for both. With n-step windows of m
+    steps, lambda weighs windows: the lambda of h / m windows with discount gamma^m (h = m: lambda 0, the window's own
+    m-step target). Call after :func:`check_lambda_arguments`.
+    """
+    if model.lambda_horizon is None:
+        return model.mc_initial_prob, model.mc_final_prob
+    window = model.n_steps
+    lam = lambda_for_horizon(float(model.lambda_horizon) / window, model.gamma**window)
+    return lam, lam
 
 
 class OffOnReplayMixin:

@@ -24,6 +24,7 @@ from sb3_offon.common.offon_model import (
     check_option,
     check_positive_integer,
     check_training_arguments,
+    delta1_bounds,
 )
 from sb3_offon.common.prioritized_buffers import PrioritizedBufferMixin
 from sb3_offon.offon_dqn.coin_flip_targets import CoinFlipTargetsMixin
@@ -50,6 +51,7 @@ OFFON_PARAMETERS = (
     "lambda_block_size",
     "lambda_refresh_interval",
     "lambda_choice",
+    "lambda_horizon",
     "double_q",
 )
 
@@ -225,6 +227,12 @@ class OffOnDQN(
         unused; ``"autocorrelation"``, one lambda per refresh, the lag-one correlation of the TD errors along the
         traces, clipped to [0, 1] (delta1 where it cannot be measured). The chosen lambdas' mean (``train/lambda``) and,
         per transition, their standard deviation (``train/lambda_std``) are logged
+    :param lambda_horizon: ``mc_mixing="lambda"``: lambda stated as a horizon in env steps: None (default), lambda is
+        delta1's schedule; h, lambda for the whole run is the one whose lambda-return contracts like an h-step return
+        with the model's ``gamma``, lambda_h = (1 - gamma^(h-1)) / (1 - gamma^h) (:func:`sb3_offon.lambda_for_horizon`;
+        3: 0.670 and 5: 0.804 at gamma 0.99), over n-step windows that of h / n windows with discount gamma^n (h =
+        ``n_steps``: lambda 0). It takes the place of ``mc_initial_prob`` and ``mc_final_prob``, which stay at their
+        defaults
     :param double_q: double Q-learning in every bootstrap (see above): the online network picks the action, the target
         network values it. Default False (DQN's max over the target network)
     :param non_finite: what a non-finite reward does: ``"raise"`` (default) a ``NonFiniteError`` naming the env and step,
@@ -284,6 +292,7 @@ class OffOnDQN(
         lambda_block_size: int = 100,
         lambda_refresh_interval: int | None = None,
         lambda_choice: str = "fixed",
+        lambda_horizon: float | None = None,
         double_q: bool = False,
         non_finite: str = "raise",
         stats_window_size: int = 100,
@@ -337,6 +346,7 @@ class OffOnDQN(
         self.lambda_block_size = lambda_block_size
         self.lambda_refresh_interval = lambda_refresh_interval
         self.lambda_choice = lambda_choice
+        self.lambda_horizon = lambda_horizon
         self.double_q = double_q
         self.non_finite = non_finite
         # The Off-On arguments are checked by _setup_model (which load() also runs); the buffer's discounting here, on
@@ -368,12 +378,18 @@ class OffOnDQN(
                 f"`lambda_choice` {self.lambda_choice!r} chooses the lambda of the lambda-returns: it needs "
                 f"`mc_mixing='lambda'`, got {self.mc_mixing!r}"
             )
+        if self.lambda_horizon is not None and self.mc_mixing != "lambda":
+            raise ValueError(
+                "`lambda_horizon` states the lambda of the lambda-returns: it needs `mc_mixing='lambda'`, "
+                f"got {self.mc_mixing!r}"
+            )
 
     def _setup_model(self) -> None:
         self._check_offon_arguments()
         self._setup_model_with_offon_buffer()
 
-        self.mc_schedule = LinearSchedule(self.mc_initial_prob, self.mc_final_prob, self.mc_fraction)
+        self.mc_schedule = LinearSchedule(*delta1_bounds(self), self.mc_fraction)
+        self.mc_prob = self.mc_schedule(self._current_progress_remaining)  # lambda_horizon's lambda before any training
         self.qlearning_schedule = LinearSchedule(
             self.qlearning_initial_prob, self.qlearning_final_prob, self.qlearning_fraction
         )

@@ -15,7 +15,13 @@ from sb3_offon.common.lambda_horizons import sample_horizon_returns
 from sb3_offon.common.lambda_refresh import LambdaRefreshMixin
 from sb3_offon.common.lambda_returns import LambdaReturnCache
 from sb3_offon.common.non_finite import NON_FINITE_OPTIONS
-from sb3_offon.common.offon_model import OffOnReplayMixin, check_lambda_arguments, check_option, check_training_arguments
+from sb3_offon.common.offon_model import (
+    OffOnReplayMixin,
+    check_lambda_arguments,
+    check_option,
+    check_training_arguments,
+    delta1_bounds,
+)
 from sb3_offon.common.prioritized_buffers import PrioritizedBufferMixin
 from sb3_offon.common.quantile_loss import WeightedQuantileHuberLoss, quantile_huber_loss
 from sb3_offon.offon_qrdqn.quantile_lambda_returns import LAMBDA_FORMS, compute_quantile_lambda_returns
@@ -139,6 +145,11 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
         lag-one correlation of the TD errors of the atoms' mean along the traces, clipped to [0, 1] (delta1 where it
         cannot be measured; the cache only). The chosen lambdas' mean (``train/lambda``) and, per transition, their
         standard deviation (``train/lambda_std``) are logged
+    :param lambda_horizon: lambda stated as a horizon in env steps: None (default), lambda is delta1's schedule; h,
+        lambda for the whole run is the one whose lambda-return contracts like an h-step return with the model's
+        ``gamma``, lambda_h = (1 - gamma^(h-1)) / (1 - gamma^h) (:func:`sb3_offon.lambda_for_horizon`; 3: 0.670 and
+        5: 0.804 at gamma 0.99), over n-step windows that of h / n windows with discount gamma^n (h = ``n_steps``:
+        lambda 0). It takes the place of ``mc_initial_prob`` and ``mc_final_prob``, which stay at their defaults
     :param non_finite: what a non-finite reward does: ``"raise"`` (default) a ``NonFiniteError`` naming the env and step,
         nothing of that step stored; ``"skip"`` a warning, the step's transitions not stored and the running episodes
         cut there as truncations. A non-finite loss always raises (:mod:`sb3_offon.common.non_finite`)
@@ -198,6 +209,7 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
         lambda_form: str = "sampled",
         lambda_cache: bool = True,
         lambda_choice: str = "fixed",
+        lambda_horizon: float | None = None,
         non_finite: str = "raise",
         stats_window_size: int = 100,
         tensorboard_log: str | None = None,
@@ -253,6 +265,7 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
         self.lambda_form = lambda_form
         self.lambda_cache = lambda_cache
         self.lambda_choice = lambda_choice
+        self.lambda_horizon = lambda_horizon
         self.non_finite = non_finite
         self._check_buffer_discounting()
         # The sampled horizons have a generator of their own (saved with the model: a resumed run draws on)
@@ -319,7 +332,8 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
     def _setup_model(self) -> None:
         self._check_offon_arguments()
         self._setup_model_with_offon_buffer()
-        self.mc_schedule = LinearSchedule(self.mc_initial_prob, self.mc_final_prob, self.mc_fraction)
+        self.mc_schedule = LinearSchedule(*delta1_bounds(self), self.mc_fraction)
+        self.mc_prob = self.mc_schedule(self._current_progress_remaining)  # lambda_horizon's lambda before any training
         self.qlearning_schedule = LinearSchedule(
             self.qlearning_initial_prob, self.qlearning_final_prob, self.qlearning_fraction
         )
