@@ -13,9 +13,10 @@ to measure what an option of OffOnDQN costs). ``--candidate offon_qrdqn`` measur
 (``--baseline qrdqn``, its default then), both with QR-DQN's default 200 quantiles.
 ``--baseline qrdqn_nstep`` is that QR-DQN with ``n_steps=3`` (MinAtar's n): against OffOnDQN, it measures what the
 quantile critic costs next to the defaults; against OffOnQRDQN, what lambda-returns cost next to n-step returns.
-``--hyperparams key:value ...`` adds the candidate's own arguments on top of the mode's, written as a study file or the
-command line writes them, so that any configuration a study runs can be priced. Tables and JSON keep the roles' names
-("DQN" the baseline, "OffOnDQN" the candidate) and say which classes and arguments they are.
+``--hyperparams key:value ...`` adds the candidate's own arguments on top of the mode's, parsed as the training command
+line parses them (a study file's ``hyperparams`` as they are), so that any configuration a study runs can be priced.
+Tables and JSON keep the roles' names ("DQN" the baseline, "OffOnDQN" the candidate) and say which classes and
+arguments they are.
 
 The two runs of a pair take turns in one process: each learn() runs in a thread of its own, and they hand a baton
 to each other every ``--switch-every`` env steps (from a callback), so only one of them computes at any time. A
@@ -49,7 +50,6 @@ that the device's queued work is counted in the run that queued it.
 """
 
 import argparse
-import ast
 import gc
 import json
 import os
@@ -72,6 +72,7 @@ from stable_baselines3.common.envs import FakeImageEnv
 
 import sb3_offon
 from sb3_offon import PAPER_TARGETS, MinAtarCNN, OffOnDQN, OffOnQRDQN, PrioritizedOffOnReplayBuffer
+from sb3_offon.cli_args import TolerantStoreDict
 from sb3_offon.offon_dqn.offon_dqn import OFFON_PARAMETERS
 from sb3_offon.qrdqn import QRDQN
 
@@ -202,7 +203,7 @@ def make_env(env_id: str) -> gym.Env:
     return gym.make(env_id)  # MinAtar's ids are registered by ``import sb3_offon``
 
 
-def parse_args() -> argparse.Namespace:
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--env", choices=sorted(ZOO_HYPERPARAMS), default="CartPole-v1", help="environment id")
     parser.add_argument(
@@ -237,10 +238,11 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument(
         "--hyperparams",
         nargs="+",
-        default=[],
+        action=TolerantStoreDict,  # parsed as the command line parses them (python -m sb3_offon.train --hyperparams)
+        default={},
         metavar="KEY:VALUE",
         help="the candidate's own arguments on top of --mode's, as a study file or the command line gives them "
-        "(values are Python literals: mc_initial_prob:0.670 n_steps:3 lambda_form:'projected')",
+        "(mc_initial_prob:0.670 n_steps:3 lambda_form:projected); not the settings both runs share (--train-freq)",
     )
     parser.add_argument(
         "--candidate",
@@ -264,21 +266,21 @@ def parse_args() -> argparse.Namespace:
         "--train-freq", type=int, default=None, help="env steps between gradient steps, for both runs (default: the settings')"
     )
     parser.add_argument("--output", type=str, default=None, help="optional JSON path (a markdown table is written next to it)")
-    return parser.parse_args()
+    return parser.parse_args(argv)
 
 
-def parse_hyperparams(items: list[str]) -> dict:
-    """``["key:value", ...]`` as a dict, each value a Python literal (``n_steps:3``, ``lambda_form:'projected'``)."""
-    kwargs = {}
-    for item in items:
-        key, separator, value = item.partition(":")
-        if not separator or not key:
-            raise SystemExit(f"--hyperparams: {item!r} is not KEY:VALUE")
-        try:
-            kwargs[key] = ast.literal_eval(value)
-        except (ValueError, SyntaxError):
-            raise SystemExit(f"--hyperparams: the value of {key!r} ({value!r}) is not a Python literal") from None
-    return kwargs
+def candidate_arguments(mode: str, hyperparams: dict, shared: dict) -> dict:
+    """
+    The candidate's own arguments: its mode's, then ``--hyperparams``. A setting both runs share (``train_freq``,
+    ``batch_size``, ...) is refused: changed for the candidate alone, the two runs of a pair would not be the same job.
+    """
+    overlap = sorted(set(hyperparams) & set(shared))
+    if overlap:
+        raise SystemExit(
+            f"--hyperparams: {', '.join(overlap)} is a setting both runs share (--train-freq for train_freq); "
+            "changed for the candidate alone, a pair would time different jobs"
+        )
+    return {**MODES[mode], **hyperparams}
 
 
 class Baton:
@@ -460,7 +462,7 @@ if __name__ == "__main__":
     # The baseline's and OffOnDQN's own arguments (the "DQN" columns are the baseline's, n-step DQN's with dqn_nstep)
     baseline_class, baseline_kwargs = BASELINES[args.baseline]
     classes = {"DQN": baseline_class, "OffOnDQN": candidate_class}
-    candidate_kwargs = {**MODES[args.mode], **parse_hyperparams(args.hyperparams)}
+    candidate_kwargs = candidate_arguments(args.mode, args.hyperparams, hyperparams)
     extra_kwargs = {"DQN": baseline_kwargs, "OffOnDQN": candidate_kwargs}
     make_env(args.env).close()  # fail early if the env (Box2D for LunarLander) is missing
     if args.device == "cuda" and not th.cuda.is_available():
@@ -482,7 +484,7 @@ if __name__ == "__main__":
         "baseline_class": baseline_class.__name__,
         "baseline_kwargs": baseline_kwargs,
         "mode": args.mode,
-        "candidate_hyperparams": parse_hyperparams(args.hyperparams),
+        "candidate_hyperparams": args.hyperparams,
         "candidate_class": candidate_class.__name__,
         "flush_denormals": args.flush_denormals,
         "prefill": args.prefill,

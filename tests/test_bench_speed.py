@@ -110,13 +110,27 @@ def test_tables_say_which_baseline_the_dqn_columns_are(name):
 
 
 def test_the_candidates_own_arguments_are_parsed_and_shown_in_the_table():
-    """``--hyperparams`` takes a study file's ``key:value`` items, values as Python literals, and the table names them."""
+    """``--hyperparams`` takes a study file's ``key:value`` items as the training command line does, refuses a setting
+    both runs share, and the table names the candidate's arguments."""
     module = load_script("bench_speed")
-    kwargs = module.parse_hyperparams(["mc_initial_prob:0.670", "n_steps:3", "lambda_form:'projected'", "lambda_cache:False"])
-    assert kwargs == {"mc_initial_prob": 0.67, "n_steps": 3, "lambda_form": "projected", "lambda_cache": False}
-    for bad in (["n_steps"], [":3"], ["lambda_form:projected"]):
-        with pytest.raises(SystemExit, match="--hyperparams"):
-            module.parse_hyperparams(bad)
+    items = ["mc_initial_prob:0.670", "n_steps:3", "lambda_form:projected", "lambda_cache:False", "mc_mixing:lambda"]
+    args = module.parse_args(["--hyperparams", *items])
+    expected = {
+        "mc_initial_prob": 0.67,
+        "n_steps": 3,
+        "lambda_form": "projected",
+        "lambda_cache": False,
+        "mc_mixing": "lambda",
+    }
+    assert args.hyperparams == expected
+    assert module.parse_args([]).hyperparams == {}
+    shared = module.ZOO_HYPERPARAMS["MinAtar/Breakout-v0"]
+    assert module.candidate_arguments("projected", {"mc_initial_prob": 0.67}, shared) == {
+        "lambda_form": "projected",
+        "mc_initial_prob": 0.67,
+    }
+    with pytest.raises(SystemExit, match="--hyperparams: batch_size, train_freq is a setting both runs share"):
+        module.candidate_arguments("defaults", {"train_freq": 1, "batch_size": 8}, shared)
     result = json.loads((SCRIPTS.parent / "results" / "speed" / "cartpole.json").read_text())
     plain = module.markdown_table(result).splitlines()[0]
     result["candidate_hyperparams"] = {"mc_initial_prob": 0.67, "lambda_form": "projected"}

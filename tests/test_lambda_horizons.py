@@ -279,8 +279,10 @@ def test_lambda_horizon_is_saved_and_can_be_changed_on_load(tmp_path):
         (dict(lambda_horizon=3, mc_initial_prob=0.5), "`mc_initial_prob`: `lambda_horizon`"),
         (dict(lambda_horizon=3, mc_final_prob=0.0), "`mc_final_prob`: `lambda_horizon`"),
         (dict(lambda_horizon=3, lambda_choice="median"), "`lambda_horizon`: `lambda_choice` 'median'"),
-        (dict(lambda_horizon=2, n_steps=3), r"`lambda_horizon` must be at least `n_steps` \(3"),
-        (dict(lambda_horizon=0.5), r"`lambda_horizon` must be at least `n_steps` \(1"),
+        (dict(lambda_horizon=2, n_steps=3), r"`lambda_horizon` must be a finite number of env steps, at least `n_steps` \(3"),
+        (dict(lambda_horizon=0.5), r"`lambda_horizon` must be a finite number of env steps, at least `n_steps` \(1"),
+        (dict(lambda_horizon=float("inf")), "`lambda_horizon` must be a finite number of env steps"),
+        (dict(lambda_horizon=3, gamma=1.0), r"`lambda_horizon` needs a discount `gamma` in \(0, 1\)"),
         (dict(lambda_horizon="3"), "`lambda_horizon` must be a real number"),
         (dict(lambda_horizon=True), "`lambda_horizon` must be a real number"),
         (dict(lambda_horizon=float("nan")), "`lambda_horizon` must be a real number"),
@@ -301,3 +303,47 @@ def test_lambda_horizon_needs_the_lambda_returns_in_offon_dqn():
         ValueError, match="`lambda_horizon` states the lambda of the lambda-returns: it needs `mc_mixing='lambda'`"
     ):
         OffOnDQN("MlpPolicy", "CartPole-v1", lambda_horizon=3, **paper)
+
+
+def test_lambda_horizon_in_a_subclass_that_passes_delta1_on():
+    """A user's subclass whose ``__init__`` takes the rest as ``**kwargs``: delta1's defaults are read from the base."""
+    from sb3_offon import OffOnDQN
+
+    class Mine(OffOnDQN):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+
+    _, settings = algo_and_settings("offon_dqn")
+    assert Mine("MlpPolicy", "CartPole-v1", lambda_horizon=3, **settings).mc_prob == pytest.approx(0.0199 / 0.029701)
+    with pytest.raises(ValueError, match="`mc_initial_prob`: `lambda_horizon`"):
+        Mine("MlpPolicy", "CartPole-v1", lambda_horizon=3, mc_initial_prob=0.5, **settings)
+
+
+def test_lambda_horizon_without_the_cache():
+    model = OffOnQRDQN("MlpPolicy", "CartPole-v1", seed=0, lambda_cache=False, lambda_horizon=3, **SMALL)
+    model.learn(400)
+    assert model.logger.name_to_value["train/lambda"] == pytest.approx(0.0199 / 0.029701)
+    # Horizons drawn with mean about 1 / (1 - 0.67) = 3.0 (fewer at episode ends)
+    assert 1.5 < model.logger.name_to_value["train/mean_horizon"] < 4.5
+
+
+def test_a_model_saved_before_lambda_horizon_existed_loads_and_trains_on_delta1(tmp_path):
+    """Its saved data has no ``lambda_horizon``: load() keeps the constructor's None, and delta1 as it was saved."""
+    import json
+    import zipfile
+
+    model = OffOnQRDQN("MlpPolicy", "CartPole-v1", seed=0, mc_initial_prob=0.5, mc_final_prob=0.5, **SMALL)
+    model.save(tmp_path / "model")
+    # Rewrite the archive's data without the key, as a version without the argument saved it
+    with zipfile.ZipFile(tmp_path / "model.zip") as archive:
+        files = {name: archive.read(name) for name in archive.namelist()}
+    data = json.loads(files["data"])
+    del data["lambda_horizon"]
+    files["data"] = json.dumps(data).encode()
+    with zipfile.ZipFile(tmp_path / "old.zip", "w") as archive:
+        for name, content in files.items():
+            archive.writestr(name, content)
+    loaded = OffOnQRDQN.load(tmp_path / "old.zip", env=model.get_env())
+    assert loaded.lambda_horizon is None and loaded.mc_schedule(0.0) == 0.5
+    loaded.learn(200)
+    assert loaded.logger.name_to_value["train/mc_prob"] == 0.5

@@ -104,6 +104,10 @@ def test_a_configuration_in_its_own_folder_judged_against_committed_runs(tmp_pat
     assert "- reported, not part of the rule, against Off-On λ (search's choice):" in table
     assert "  - does not hold: IQM of normalised AUC above Off-On λ (search's choice)'s: 0.350" in table
     assert not (tmp_path / "report" / "judgement.md").exists()  # no choice among candidates written
+    # A candidate that is not one of the candidates is refused
+    path.write_text(yaml.safe_dump({**study_file, "candidate": "horizon_typo"}))
+    with pytest.raises(ValueError, match="the candidate 'horizon_typo' is not one of the algos"):
+        study_module.Study.read(path)
     # The runner gives the configuration its settings and its folder, the others theirs
     specs = grid_specs.candidate_specs(
         grid_specs.argparse.Namespace(

@@ -115,30 +115,45 @@ def check_lambda_arguments(model: Any) -> None:
 
 def check_lambda_horizon(model: Any) -> None:
     """
-    ``lambda_horizon``: None, or a real number of env steps at least ``n_steps`` (a window's length), with delta1's
-    schedule (``mc_initial_prob``, ``mc_final_prob``) at the constructor's defaults and ``lambda_choice="fixed"``: the
-    horizon states lambda for the whole run, and a second statement of it would be ambiguous.
+    ``lambda_horizon``: None, or a finite real number of env steps at least ``n_steps`` (a window's length), with
+    ``gamma`` below 1, delta1's schedule (``mc_initial_prob``, ``mc_final_prob``) at the constructor's defaults and
+    ``lambda_choice="fixed"``: the horizon states lambda for the whole run, and a second statement of it would be
+    ambiguous.
 
     :raises ValueError: naming the bad parameter
     """
     if model.lambda_horizon is None:
         return
     horizon = real_number("lambda_horizon", model.lambda_horizon)
-    if not horizon >= model.n_steps:
+    if not math.isfinite(horizon) or horizon < model.n_steps:
         raise ValueError(
-            f"`lambda_horizon` must be at least `n_steps` ({model.n_steps}: a window's length), got {model.lambda_horizon!r}"
+            f"`lambda_horizon` must be a finite number of env steps, at least `n_steps` ({model.n_steps}: a window's "
+            f"length), got {model.lambda_horizon!r}"
         )
-    defaults = inspect.signature(type(model).__init__).parameters
+    if not 0.0 < model.gamma < 1.0:
+        raise ValueError(f"`lambda_horizon` needs a discount `gamma` in (0, 1) to contract with, got {model.gamma!r}")
     for name in ("mc_initial_prob", "mc_final_prob"):
-        if getattr(model, name) != defaults[name].default:
+        if getattr(model, name) != constructor_default(type(model), name):
             raise ValueError(
                 f"`{name}`: `lambda_horizon` ({model.lambda_horizon!r}) states lambda for the whole run; leave "
-                "`mc_initial_prob` and `mc_final_prob` at their defaults, or pass lambda through them instead"
+                "`mc_initial_prob` and `mc_final_prob` at their defaults, or pass lambda through them instead (to tune "
+                "lambda, leave `lambda_horizon` out of the settings: the samplers tune it through them)"
             )
     if model.lambda_choice != "fixed":
         raise ValueError(
             f"`lambda_horizon`: `lambda_choice` {model.lambda_choice!r} chooses lambda itself; use `lambda_choice='fixed'`"
         )
+
+
+def constructor_default(algo_class: type, name: str) -> Any:
+    """The default of ``name`` in the first ``__init__`` along ``algo_class``'s bases that names it (a subclass may pass
+    it on through ``**kwargs``)."""
+    for base in algo_class.__mro__:
+        init = vars(base).get("__init__")
+        parameter = inspect.signature(init).parameters.get(name) if init is not None else None
+        if parameter is not None and parameter.default is not inspect.Parameter.empty:
+            return parameter.default
+    raise ValueError(f"`{name}`: no constructor of {algo_class.__name__} has a default for it")
 
 
 def delta1_bounds(model: Any) -> tuple[float, float]:
