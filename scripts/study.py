@@ -10,6 +10,7 @@ study has a rule, in ``verdict.md``. A ``setup_check`` block (``algo``, ``seeds`
 ``scripts/random_policy.py``). ``--seeds`` and ``--envs`` judge and report the study on some of its seeds or envs
 only, into a folder of their own: an interim look while runs are missing (the seeds, or the envs, on which every
 algorithm has finished), marked as such in its table; the study's verdict is the one on all its seeds and envs.
+``--by-seed`` prints the candidate's runs beside its references' on the same seeds and writes nothing.
 
 Usage::
 
@@ -17,6 +18,7 @@ Usage::
     python scripts/study.py benchmarks/minatar.yml --setup-check --random results/minatar/random_policy.json
     python scripts/study.py benchmarks/minatar.yml --seeds 40 41 42 43   # into results/minatar/seeds_40_41_42_43/
     python scripts/study.py benchmarks/classic_qr.yml --envs CartPole-v1 Acrobot-v1   # results/classic_qr/envs_.../
+    python scripts/study.py benchmarks/minatar_horizon_judgement.yml --by-seed   # the runs so far, paired by seed
 """
 
 import argparse
@@ -74,6 +76,34 @@ def per_env_table(study: Study, runs: dict, scores: dict, measure: str) -> list[
             text = interval((point, low, high)) if len(values) > 1 else f"{point:.2f}"  # the count follows
             cells.append(f"{text} ({len(values)})")
         lines.append(f"| {env} | {' | '.join(cells)} |")
+    return lines
+
+
+def by_seed_table(study: Study, runs: dict, scores: dict) -> list[str]:
+    """
+    Each run of the candidate (a study without one: of its first algorithm), final / AUC, beside the runs of the rule's
+    references and of ``also_against`` on the same env and seed ("-" where that run is not in): a look at a study's
+    runs while they come in, paired by seed, which places nothing (one seed carries no interval).
+    """
+    first = study.candidate or study.algos[0]
+    others = [*(criterion["reference"] for criterion in study.rule), *study.also_against]
+    algos = list(dict.fromkeys([first, *(algo for algo in others if algo in study.algos)]))
+    lines = [
+        "| env | seed | " + " | ".join(study.label(algo) for algo in algos) + " |",
+        "|---|---:|" + "---:|" * len(algos),
+    ]
+    for env in study.envs:
+        by_algo = {algo: {run.seed: index for index, run in enumerate(runs.get(env, {}).get(algo, []))} for algo in algos}
+        for seed in sorted(by_algo[first]):
+            cells = []
+            for algo in algos:
+                index = by_algo[algo].get(seed)
+                if index is None:
+                    cells.append("-")
+                    continue
+                scored = scores[env][algo]
+                cells.append(f"{scored['final'][index]:.2f} / {scored['auc'][index]:.2f}")
+            lines.append(f"| {env} | {seed} | {' | '.join(cells)} |")
     return lines
 
 
@@ -359,8 +389,17 @@ def main(argv: list[str] | None = None) -> str:
         default=None,
         help="report on these of the study's envs only, an interim look (default folder: results/<study>/envs_<envs>)",
     )
+    parser.add_argument(
+        "--by-seed",
+        action="store_true",
+        help="print each of the candidate's runs (final / AUC) beside the references' on the same seed; writes nothing",
+    )
     args = parser.parse_args(argv)
     study = Study.read(args.study)
+    if args.by_seed:
+        runs, scores = study_runs(study, args.root)
+        print("\n".join(by_seed_table(study, runs, scores)))
+        return "by seed"
     out = args.out or Path(study.out or Path("results") / study.name)
     if args.seeds or args.envs:
         if args.setup_check:

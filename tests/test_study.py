@@ -168,6 +168,32 @@ def test_missing_runs_leave_the_verdict_open(tmp_path: Path) -> None:
     assert all(line.startswith("open:") for line in lines)
 
 
+def test_the_runs_so_far_paired_by_seed(tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch) -> None:
+    """``--by-seed``: a row per run of the candidate, the reference's and the others' runs on its seed beside it (final /
+    AUC, both the run's constant value here), "-" where that run is not in; nothing written."""
+    study_module = load_script("study")
+    path, root = write_study(tmp_path, {"CartPole-v1": [3.0, 4.0, 5.0, 6.0], "Acrobot-v1": [7.0, 8.0, 9.0, 10.0]})
+    path.write_text(yaml.safe_dump({**STUDY, "algos": [*STUDY["algos"], "qrdqn"], "also_against": ["qrdqn"]}))
+    write_run(root, "toy", "qrdqn", "Acrobot-v1", 2, [[0.5, 0.5]] * 3)
+    (root / "toy" / "offon_lambda_choice" / "CartPole-v1_3" / "done.json").unlink()
+    (root / "toy" / "dqn" / "Acrobot-v1_4" / "done.json").unlink()
+    monkeypatch.chdir(tmp_path)
+    assert study_module.main([str(path), "--root", str(root), "--by-seed"]) == "by seed"
+    lines = capsys.readouterr().out.splitlines()
+    study = study_module.Study.read(path)
+    assert lines[0] == f"| env | seed | {study.label('offon_lambda_choice')} | DQN | QR-DQN |"  # candidate, reference, other
+    assert lines[2:] == [
+        "| CartPole-v1 | 1 | 3.00 / 3.00 | 1.00 / 1.00 | - |",
+        "| CartPole-v1 | 2 | 4.00 / 4.00 | 2.00 / 2.00 | - |",
+        "| CartPole-v1 | 4 | 6.00 / 6.00 | 4.00 / 4.00 | - |",
+        "| Acrobot-v1 | 1 | 7.00 / 7.00 | 1.00 / 1.00 | - |",
+        "| Acrobot-v1 | 2 | 8.00 / 8.00 | 2.00 / 2.00 | 0.50 / 0.50 |",
+        "| Acrobot-v1 | 3 | 9.00 / 9.00 | 3.00 / 3.00 | - |",
+        "| Acrobot-v1 | 4 | 10.00 / 10.00 | - | - |",
+    ]
+    assert not (tmp_path / "results").exists()
+
+
 def test_the_verdict_waits_only_for_the_runs_its_rule_reads(tmp_path: Path) -> None:
     study_module = load_script("study")
     path, root = write_study(tmp_path, {env: [3.0, 4.0, 5.0, 6.0] for env in ENVS})
