@@ -176,8 +176,11 @@ def command(study: Study, interim: Interim | None = None) -> str:
 
 def env_subset(study: Study, envs: list[str]) -> Study:
     """``study`` on ``envs`` only (each one of its envs, kept in the study's order; a fixed normalisation narrowed too)."""
-    if study.candidates:
-        raise ValueError(f"{study.path}: --envs applies to a study without candidates")
+    own = sorted(name for name, candidate in study.candidates.items() if "envs" in candidate)
+    if own:
+        raise ValueError(
+            f"{study.path}: --envs applies to a study whose candidates have no envs of their own ({', '.join(own)})"
+        )
     unknown = sorted(set(envs) - set(study.envs))
     if unknown:
         raise ValueError(f"--envs: {', '.join(unknown)} not among the study's envs {study.envs}")
@@ -190,11 +193,14 @@ def env_subset(study: Study, envs: list[str]) -> Study:
 def seed_subset(study: Study, seeds: list[int]) -> Study:
     """
     ``study`` on ``seeds`` only (each one of its seeds): every env's seeds narrowed to them, so that the rule reads a run
-    of every algorithm on every env for each of them. A study with candidates (a search) has seeds per candidate and is
-    not narrowed.
+    of every algorithm on every env for each of them. A search whose candidates have seeds of their own is not narrowed;
+    a head-to-head whose candidates take the study's seeds is.
     """
-    if study.candidates:
-        raise ValueError(f"{study.path}: --seeds applies to a study without candidates")
+    own = sorted(name for name, candidate in study.candidates.items() if "seeds" in candidate)
+    if own:
+        raise ValueError(
+            f"{study.path}: --seeds applies to a study whose candidates have no seeds of their own ({', '.join(own)})"
+        )
     unknown = sorted(set(seeds) - set(study.seeds) - {seed for env_seeds in study.seeds_on.values() for seed in env_seeds})
     if unknown:
         raise ValueError(f"--seeds: {', '.join(map(str, unknown))} not among the study's seeds {study.seeds}")

@@ -104,6 +104,16 @@ def test_a_configuration_in_its_own_folder_judged_against_committed_runs(tmp_pat
     assert "- reported, not part of the rule, against Off-On λ (search's choice):" in table
     assert "  - does not hold: IQM of normalised AUC above Off-On λ (search's choice)'s: 0.350" in table
     assert not (tmp_path / "report" / "judgement.md").exists()  # no choice among candidates written
+    # An interim look on seeds 1-2: the configuration's normalised AUC over both envs is 0.2, 0.2, 0.3, 0.3 (IQM 0.25),
+    # DQN's 0.1, 0.1, 0.2, 0.2 (0.15); a search whose candidates have seeds of their own is not narrowed
+    narrowed = study_module.seed_subset(study, [1, 2])
+    iqms = study_module.iqm_intervals(narrowed, *study_module.study_runs(narrowed, root), "auc")
+    assert iqms["horizon"][0] == pytest.approx(0.25) and iqms["dqn"][0] == pytest.approx(0.15)
+    assert study_module.report(narrowed, root, tmp_path / "interim") == "holds"
+    with_own_seeds = {**study_file["candidates"], "horizon": {**study_file["candidates"]["horizon"], "seeds": [1, 2]}}
+    path.write_text(yaml.safe_dump({**study_file, "candidates": with_own_seeds}))
+    with pytest.raises(ValueError, match=r"candidates have no seeds of their own \(horizon\)"):
+        study_module.seed_subset(study_module.Study.read(path), [1])
     # A candidate that is not one of the candidates is refused
     path.write_text(yaml.safe_dump({**study_file, "candidate": "horizon_typo"}))
     with pytest.raises(ValueError, match="the candidate 'horizon_typo' is not one of the algos"):
