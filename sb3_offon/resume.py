@@ -34,6 +34,8 @@ damaged (a run killed while writing it, a file lost or truncated). A checkpoint 
 import json
 import os
 import shutil
+import signal
+import threading
 import warnings
 import zipfile
 from collections.abc import Iterator, Sequence
@@ -113,6 +115,31 @@ def n_step_reload_unflagged() -> Iterator[None]:
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message=r"`n_steps=\d+` is ignored because a custom `replay_buffer_class`")
         yield
+
+
+@contextmanager
+def interrupts_held() -> Iterator[None]:
+    """
+    A Ctrl-C (SIGINT) that arrives inside the block takes effect when the block ends, not inside it. A KeyboardInterrupt
+    raised inside torch's zip writer leaves the writer in a state whose cleanup raises a RuntimeError, which replaces the
+    KeyboardInterrupt: the run would end in a traceback, not in the interruption line. A checkpoint takes a moment to
+    write, so the interrupt waits for it. Outside the main thread (where no signal handler can be set) the block runs as
+    it is.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    received: list[Any] = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: received.append(frame))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if received:
+        if callable(previous):
+            previous(signal.SIGINT, received[0])
+        elif previous == signal.SIG_DFL:
+            signal.raise_signal(signal.SIGINT)
 
 
 def resumed_seed(seed: int | None, num_timesteps: int) -> int:
@@ -465,7 +492,14 @@ class RunCheckpoint(BaseCallback):
         return [] if self.monitor_dir is None else sorted(self.monitor_dir.glob(f"*{MONITOR_SUFFIX}"))
 
     def save(self) -> Checkpoint:
-        """Write a checkpoint of the run now, then point ``latest`` at it and remove all but the newest complete ones."""
+        """
+        Write a checkpoint of the run now, then point ``latest`` at it and remove all but the newest complete ones. A
+        Ctrl-C while it writes takes effect once it is written (:func:`interrupts_held`).
+        """
+        with interrupts_held():
+            return self._write()
+
+    def _write(self) -> Checkpoint:
         model: BaseAlgorithm = self.model
         target = self.folder / str(model.num_timesteps)
         shutil.rmtree(target, ignore_errors=True)  # a partial one left by a killed run

@@ -2,8 +2,10 @@
 
 import itertools
 import json
+import os
 import pickle
 import re
+import signal
 import sys
 import warnings
 from pathlib import Path
@@ -22,7 +24,15 @@ from stable_baselines3.common.monitor import Monitor
 
 from sb3_offon import OffOnDQN, OffOnQRDQN
 from sb3_offon.callbacks import StopOnMeanTrainingReward
-from sb3_offon.resume import Checkpoint, CheckpointError, RunCheckpoint, cut_running_episodes, joined_monitor, resumed_seed
+from sb3_offon.resume import (
+    Checkpoint,
+    CheckpointError,
+    RunCheckpoint,
+    checkpoint_problem,
+    cut_running_episodes,
+    joined_monitor,
+    resumed_seed,
+)
 from sb3_offon.train import main
 
 BUDGET, EVERY = 4000, 1000
@@ -388,3 +398,26 @@ def test_the_python_way_resumes_as_the_command_line_does(tmp_path: Path, monkeyp
     assert evaluations.evaluations_timesteps == whole_evaluations.evaluations_timesteps == [500, 1000, 1500, 2000]
     for attribute in ("num_timesteps", "_n_updates", "_n_calls", "exploration_rate", "mc_prob"):
         assert getattr(resumed, attribute) == getattr(whole, attribute), attribute
+
+
+def test_a_ctrl_c_while_a_checkpoint_is_written_takes_effect_once_it_is_written(tmp_path: Path, monkeypatch) -> None:
+    """A SIGINT raised inside torch's zip writer would end the run in a RuntimeError from the writer's cleanup; held
+    until the checkpoint is written, it ends the run as a KeyboardInterrupt with a complete checkpoint behind it."""
+    handler = signal.getsignal(signal.SIGINT)
+    model, _, callbacks = python_run(tmp_path, [])
+    original_save = type(model).save
+    interrupted_at: list[int] = []
+
+    def save_with_a_ctrl_c(self, path, *args, **kwargs) -> None:  # type: ignore[no-untyped-def]
+        if self.num_timesteps == 1000:
+            interrupted_at.append(self.num_timesteps)
+            os.kill(os.getpid(), signal.SIGINT)  # delivered now, in the middle of the checkpoint
+        original_save(self, path, *args, **kwargs)
+
+    monkeypatch.setattr(type(model), "save", save_with_a_ctrl_c)
+    with pytest.raises(KeyboardInterrupt):
+        model.learn(2000, callback=callbacks)
+    assert interrupted_at == [1000] and model.num_timesteps == 1000
+    checkpoint = Checkpoint.latest(tmp_path)
+    assert checkpoint is not None and checkpoint.num_timesteps == 1000 and checkpoint_problem(checkpoint.folder) is None
+    assert signal.getsignal(signal.SIGINT) is handler  # Python's own handler back in place
