@@ -123,10 +123,10 @@ def interrupts_held() -> Iterator[None]:
     A Ctrl-C (SIGINT) that arrives inside the block takes effect when the block ends, not inside it. A KeyboardInterrupt
     raised inside torch's zip writer leaves the writer in a state whose cleanup raises a RuntimeError, which replaces the
     KeyboardInterrupt: the run would end in a traceback, not in the interruption line. A checkpoint takes a moment to
-    write, so the interrupt waits for it. Outside the main thread (where no signal handler can be set) the block runs as
-    it is.
+    write, so the interrupt waits for it. Outside the main thread (where no signal handler can be set), or where SIGINT's
+    handler was not set from Python (``signal.getsignal`` gives None, which cannot be put back), the block runs as it is.
     """
-    if threading.current_thread() is not threading.main_thread():
+    if threading.current_thread() is not threading.main_thread() or signal.getsignal(signal.SIGINT) is None:
         yield
         return
     received: list[Any] = []

@@ -174,13 +174,19 @@ def command(study: Study, interim: Interim | None = None) -> str:
     return f"python scripts/study.py {study.path.as_posix()}{interim.arguments() if interim else ''}"
 
 
-def env_subset(study: Study, envs: list[str]) -> Study:
-    """``study`` on ``envs`` only (each one of its envs, kept in the study's order; a fixed normalisation narrowed too)."""
-    own = sorted(name for name, candidate in study.candidates.items() if "envs" in candidate)
+def refuse_candidates_with_own(study: Study, key: str) -> None:
+    """``--seeds`` and ``--envs`` narrow the study's own seeds or envs: a search whose candidates have ``key`` of their
+    own is refused, naming them."""
+    own = sorted(name for name, candidate in study.candidates.items() if key in candidate)
     if own:
         raise ValueError(
-            f"{study.path}: --envs applies to a study whose candidates have no envs of their own ({', '.join(own)})"
+            f"{study.path}: --{key} applies to a study whose candidates have no {key} of their own ({', '.join(own)})"
         )
+
+
+def env_subset(study: Study, envs: list[str]) -> Study:
+    """``study`` on ``envs`` only (each one of its envs, kept in the study's order; a fixed normalisation narrowed too)."""
+    refuse_candidates_with_own(study, "envs")
     unknown = sorted(set(envs) - set(study.envs))
     if unknown:
         raise ValueError(f"--envs: {', '.join(unknown)} not among the study's envs {study.envs}")
@@ -196,11 +202,7 @@ def seed_subset(study: Study, seeds: list[int]) -> Study:
     of every algorithm on every env for each of them. A search whose candidates have seeds of their own is not narrowed;
     a head-to-head whose candidates take the study's seeds is.
     """
-    own = sorted(name for name, candidate in study.candidates.items() if "seeds" in candidate)
-    if own:
-        raise ValueError(
-            f"{study.path}: --seeds applies to a study whose candidates have no seeds of their own ({', '.join(own)})"
-        )
+    refuse_candidates_with_own(study, "seeds")
     unknown = sorted(set(seeds) - set(study.seeds) - {seed for env_seeds in study.seeds_on.values() for seed in env_seeds})
     if unknown:
         raise ValueError(f"--seeds: {', '.join(map(str, unknown))} not among the study's seeds {study.seeds}")
