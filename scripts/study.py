@@ -24,6 +24,7 @@ Usage::
 import argparse
 import json
 import sys
+import textwrap
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -57,6 +58,15 @@ COLORS = {
     "qrdqn_nstep": "tab:purple",
     "offon_qrdqn": "tab:brown",
 }
+PALETTE = [f"tab:{name}" for name in ("blue", "orange", "green", "red", "purple", "brown", "pink", "gray", "olive", "cyan")]
+
+
+def algo_colors(algos: list[str]) -> dict[str, str]:
+    """A colour per algorithm of a study, no two alike: the fixed colour where it has one (so that figures of different
+    studies agree), the next unused colour of the palette for the rest (a study's candidates, named by the study)."""
+    colors = {algo: COLORS[algo] for algo in algos if algo in COLORS}
+    free = iter(color for color in PALETTE if color not in colors.values())
+    return {algo: colors.get(algo) or next(free, "black") for algo in algos}
 
 
 # ----------------------------------------------------------------------------------------------------------------------
@@ -312,18 +322,30 @@ def plot_curves(study: Study, runs: dict, out: Path) -> None:
     envs = [env for env in study.envs if env in runs]
     if not envs:
         return
-    fig, axes = plt.subplots(1, len(envs), figsize=(4.2 * len(envs), 3.6), squeeze=False)
+    colors = algo_colors(study.algos)
+    # One legend below the panels, not over a panel's curves: rows of four, each row a quarter inch
+    ncol = min(len(study.algos), 4)
+    legend_rows = -(-len(study.algos) // ncol)
+    height = 3.6 + 0.25 * legend_rows
+    fig, axes = plt.subplots(1, len(envs), figsize=(4.2 * len(envs), height), squeeze=False)
+    lines: dict[str, object] = {}
+    counts: dict[str, int] = {}
     for ax, env in zip(axes[0], envs, strict=True):
         for algo, kept in runs[env].items():
             grid, curves = evaluation_curves(kept)
             mean, low, high = mean_ci(curves, study.reps_iqm)
-            (line,) = ax.plot(grid, mean, color=COLORS.get(algo), label=f"{study.label(algo)} ({len(kept)})")
-            ax.fill_between(grid, low, high, color=line.get_color(), alpha=0.2, linewidth=0)  # the line's, if cycled
+            (line,) = ax.plot(grid, mean, color=colors.get(algo))
+            ax.fill_between(grid, low, high, color=line.get_color(), alpha=0.2, linewidth=0)
+            lines.setdefault(algo, line)
+            counts[algo] = counts.get(algo, 0) + len(kept)
         ax.set(title=env, xlabel="Environment steps", ylabel="Evaluation return")
         ax.grid(alpha=0.3)
-    axes[0][0].legend(fontsize=8)
-    fig.suptitle(f"{study.name}: mean evaluation return over seeds, 95% bootstrap bands (runs in brackets)", fontsize=10)
-    fig.tight_layout()
+    labels = [f"{study.label(algo)} ({counts[algo]})" for algo in lines]
+    fig.legend(list(lines.values()), labels, loc="lower center", ncol=ncol, fontsize=8, frameon=False)
+    fig.suptitle(
+        f"{study.name}: mean evaluation return over seeds, 95% bootstrap bands (runs over the envs in brackets)", fontsize=10
+    )
+    fig.tight_layout(rect=(0, (0.25 * legend_rows + 0.1) / height, 1, 1))
     fig.savefig(out / "curves.png", dpi=100)
     plt.close(fig)
 
@@ -332,12 +354,14 @@ def plot_aggregate(study: Study, runs: dict, scores: dict, out: Path) -> None:
     panels = [(measure, iqm_intervals(study, runs, scores, measure)) for measure in ("auc", "final")]
     if not any(iqms for _, iqms in panels):
         return
-    fig, axes = plt.subplots(1, 2, figsize=(9, 0.6 * len(study.algos) + 1.6))
+    colors = algo_colors(study.algos)
+    fig, axes = plt.subplots(1, 2, figsize=(10, 0.6 * len(study.algos) + 1.6))
     for ax, (measure, iqms) in zip(axes, panels, strict=True):
         for row, (algo, (point, low, high)) in enumerate(iqms.items()):
-            ax.barh(row, high - low, left=low, color=COLORS.get(algo), alpha=0.6, height=0.6)
+            ax.barh(row, high - low, left=low, color=colors.get(algo), alpha=0.6, height=0.6)
             ax.plot([point, point], [row - 0.3, row + 0.3], color="black", linewidth=2)
-        ax.set_yticks(range(len(iqms)), [study.label(algo) for algo in iqms])
+        # Long labels (a candidate's settings) wrapped, or they take the panel's width
+        ax.set_yticks(range(len(iqms)), [textwrap.fill(study.label(algo), 24) for algo in iqms], fontsize=8)
         ax.set_title(f"IQM of normalised {'AUC' if measure == 'auc' else 'final return'}", fontsize=10)
         ax.grid(axis="x", alpha=0.3)
     fig.suptitle(f"{study.name}: across {len(study.envs)} envs (95% stratified bootstrap CIs)", fontsize=10)
