@@ -553,3 +553,15 @@ def test_the_benchmarks_page_names_every_study_file() -> None:
     studies = sorted(path.stem for path in (root / "benchmarks").glob("*.yml"))
     assert studies, "the study files are in benchmarks/"
     assert [study for study in studies if f"`{study}`" not in page] == []
+
+
+def test_every_algorithm_of_a_study_gets_its_own_colour() -> None:
+    study_module = load_script("study")
+    # A candidate named by its study came out in the colour cycle's first, DQN's blue, beside DQN itself
+    algos = ["offon_qrdqn_cache_n3", "qrdqn_nstep", "qrdqn", "offon_qrdqn", "offon_lambda_choice", "dqn", "dqn_nstep"]
+    colors = study_module.algo_colors(algos)
+    assert sorted(colors) == sorted(algos)
+    assert len(set(colors.values())) == len(algos) and all(str(color).startswith("tab:") for color in colors.values())
+    assert colors["dqn"] == study_module.COLORS["dqn"] and colors["qrdqn_nstep"] == study_module.COLORS["qrdqn_nstep"]
+    many = study_module.algo_colors([f"candidate_{index}" for index in range(10)])
+    assert len(set(many.values())) == 10
