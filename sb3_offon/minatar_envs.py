@@ -40,6 +40,11 @@ MINATAR_MAX_EPISODE_STEPS = 10_000
 INSTALL_HINT = 'pip install -e ".[minatar]" in a clone of the source, or pip install "sb3-offon[minatar]"'
 
 
+class MinAtarNotInstalledError(ModuleNotFoundError):
+    """A ``MinAtar/*`` id made without MinAtar installed; the message names the extra that brings it (the command line
+    prints it as one line)."""
+
+
 def minatar_ids(versions: tuple[str, ...] = ("v0", "v1")) -> list[str]:
     """The registered ids, ``MinAtar/Asterix-v0`` first: by game, each with the requested versions."""
     return [f"MinAtar/{name}-{version}" for name in MINATAR_GAMES for version in versions]
@@ -54,7 +59,7 @@ def make_minatar(game: str, use_minimal_action_set: bool = False, **kwargs: Any)
     :param kwargs: the other keyword arguments of ``BaseEnv`` (``render_mode``, ``sticky_action_prob``,
         ``difficulty_ramping``)
     :return: the environment (``gym.make`` adds the time limit around it)
-    :raises ModuleNotFoundError: when MinAtar is not installed, naming the extra that brings it
+    :raises MinAtarNotInstalledError: when MinAtar is not installed, naming the extra that brings it
     """
     try:
         from minatar.gym import BaseEnv
@@ -62,7 +67,7 @@ def make_minatar(game: str, use_minimal_action_set: bool = False, **kwargs: Any)
         # Not MinAtar itself (one of its own dependencies, say): a broken install, whose traceback says more
         if error.name is None or error.name.partition(".")[0] != "minatar":
             raise
-        raise ModuleNotFoundError(
+        raise MinAtarNotInstalledError(
             f"The MinAtar games need the optional 'minatar' dependencies (module 'minatar' is missing): {INSTALL_HINT}",
             name="minatar",
         ) from None

@@ -367,8 +367,8 @@ def run_errors_in_one_line(
 ) -> Iterator[None]:
     """
     Turn the errors that say what to change in a line (an unknown hyperparameter, a checkpoint that cannot be resumed,
-    a non-finite reward or loss) into that line on stderr: exit status 2 for ``usage_errors`` (as argparse's), 1 for
-    ``run_errors`` (the run failed).
+    a non-finite reward or loss, MinAtar not installed) into that line on stderr: exit status 2 for ``usage_errors``
+    (as argparse's), 1 for ``run_errors`` (the run failed).
 
     :raises SystemExit: after printing the line
     """
@@ -396,6 +396,7 @@ def main() -> int:
 
         from sb3_offon.cli_args import use_tolerant_store_dict
         from sb3_offon.common.non_finite import NonFiniteError
+        from sb3_offon.minatar_envs import MinAtarNotInstalledError
         from sb3_offon.resume import CheckpointError
         from sb3_offon.zoo import ALGO_SUMMARIES, ALGOS, register
         from sb3_offon.zoo_checks import (
@@ -413,7 +414,8 @@ def main() -> int:
     sys.argv[1:] = one_thread_by_default(typed)
     flush_denormals_unless_kept(sys.argv[1:])
     usage_errors = (UnknownHyperparameterError, HyperparameterError, CheckpointError, UnsupportedActionSpaceError)
-    one_line = run_errors_in_one_line(usage_errors, (NonFiniteError,))
+    # A MinAtar id without MinAtar: the line names the extra to install (a missing extra, as for the zoo: status 1)
+    one_line = run_errors_in_one_line(usage_errors, (NonFiniteError, MinAtarNotInstalledError))
     try:
         with one_line, argument_errors_in_one_line(), unknown_env_in_one_line():
             with warnings_in_one_line((DefaultHyperparametersWarning,)):

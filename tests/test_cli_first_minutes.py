@@ -84,6 +84,23 @@ def test_help_still_lists_the_algorithms(monkeypatch: pytest.MonkeyPatch, capsys
         assert f"\n  {name} " in head and name in choices.split(","), name
 
 
+# --- a MinAtar game without MinAtar -----------------------------------------------------------------------------------
+
+
+def test_a_minatar_game_without_minatar_is_one_line(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys) -> None:
+    # The README's pick for MinAtar-like games, on an install with the zoo extra only: MinAtar's import fails as an
+    # uninstalled package's does
+    for module in [name for name in sys.modules if name == "minatar" or name.startswith("minatar.")]:
+        monkeypatch.delitem(sys.modules, module)
+    monkeypatch.setitem(sys.modules, "minatar", None)
+    no_training(monkeypatch)
+    assert run(monkeypatch, "--algo", "qrdqn_nstep", "--env", "MinAtar/Breakout-v0", "-f", str(tmp_path)) == 1
+    assert error_line(capsys) == (
+        f"{PROG}: error: The MinAtar games need the optional 'minatar' dependencies (module 'minatar' is missing): "
+        'pip install -e ".[minatar]" in a clone of the source, or pip install "sb3-offon[minatar]"'
+    )
+
+
 # --- an env whose actions the algorithm cannot take -------------------------------------------------------------------
 
 
