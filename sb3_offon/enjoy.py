@@ -9,12 +9,20 @@ Example::
     python -m sb3_offon.enjoy --algo offon_dqn --env CartPole-v1 -f logs -n 2000 --no-render
 """
 
+import re
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
 from typing import Any
 
 from stable_baselines3.common.base_class import BaseAlgorithm
 
 from sb3_offon.extras import zoo_required
+
+# The zoo's words when ``-f``/``--exp-id``/``--load-*`` name no saved model (rl_zoo3.utils.get_model_path): an assertion
+# for a missing folder, a ValueError for a missing file
+NO_MODEL = re.compile(r"The .* folder was not found|No (model|checkpoint) found for ")
 
 
 class ReplayLoader:
@@ -46,6 +54,34 @@ class ReplayLoader:
         return self.algo_class.load(path, **kwargs)
 
 
+def prog() -> str:
+    """The command's name as it was run: the console script's, else ``python -m sb3_offon.enjoy``."""
+    script = Path(sys.argv[0]).name if sys.argv else ""
+    return script if script.startswith("sb3-offon-enjoy") else "python -m sb3_offon.enjoy"
+
+
+@contextmanager
+def replay_errors_in_one_line(run_errors: tuple[type[BaseException], ...] = ()) -> Iterator[None]:
+    """
+    Turn "no saved model there" (a wrong ``-f``, ``--algo``, ``--env`` or ``--exp-id``; the zoo asserts or raises a
+    ``ValueError`` with a traceback) into one line on stderr with exit status 2, and ``run_errors`` (MinAtar not
+    installed) into one line with exit status 1. Any other error keeps its traceback.
+
+    :param run_errors: the errors whose message is the whole report
+    :raises SystemExit: after printing the line
+    """
+    try:
+        yield
+    except (AssertionError, ValueError) as error:
+        if not NO_MODEL.match(str(error)):
+            raise
+        print(f"{prog()}: error: {error}; -f takes the folder that training's -f wrote", file=sys.stderr)
+        raise SystemExit(2) from None
+    except run_errors as error:
+        print(f"{prog()}: error: {error}", file=sys.stderr)
+        raise SystemExit(1) from None
+
+
 def main() -> None:
     """Register the algorithms, then run the zoo's ``enjoy`` command line on ``sys.argv``."""
     # Imported here, not at the top: without the zoo extra, a one-line hint instead of a traceback
@@ -53,6 +89,7 @@ def main() -> None:
         import rl_zoo3.enjoy as zoo_enjoy
 
         from sb3_offon.cli_args import use_tolerant_store_dict
+        from sb3_offon.minatar_envs import MinAtarNotInstalledError
         from sb3_offon.train import one_thread_by_default
         from sb3_offon.zoo import ALGOS, register
     register()
@@ -62,7 +99,8 @@ def main() -> None:
     sys.argv[1:] = one_thread_by_default(sys.argv[1:])
     # A copy for enjoy alone: training keeps the real classes
     zoo_enjoy.ALGOS = {**zoo_enjoy.ALGOS, **{name: ReplayLoader(cls) for name, cls in ALGOS.items()}}  # type: ignore[assignment,misc]
-    zoo_enjoy.enjoy()
+    with replay_errors_in_one_line((MinAtarNotInstalledError,)):
+        zoo_enjoy.enjoy()
 
 
 if __name__ == "__main__":

@@ -22,6 +22,8 @@ from rl_zoo3.exp_manager import ExperimentManager
 from stable_baselines3 import DQN, PPO
 
 from sb3_offon import OffOnDQN, OffOnQRDQN
+from sb3_offon.enjoy import main as enjoy_main
+from sb3_offon.enjoy import replay_errors_in_one_line
 from sb3_offon.resume import Checkpoint
 from sb3_offon.train import INTERRUPTED, interruption_line, main, resume_command
 from sb3_offon.zoo import ALGOS, OffOnExperimentManager
@@ -99,6 +101,38 @@ def test_a_minatar_game_without_minatar_is_one_line(tmp_path: Path, monkeypatch:
         f"{PROG}: error: The MinAtar games need the optional 'minatar' dependencies (module 'minatar' is missing): "
         'pip install -e ".[minatar]" in a clone of the source, or pip install "sb3-offon[minatar]"'
     )
+
+
+# --- replaying from a folder with no saved model -----------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "made, words",
+    [
+        ([], "The {folder}/offon_dqn folder was not found"),  # -f names a folder training never wrote
+        (["offon_dqn"], "No model found for offon_dqn on CartPole-v1, path: {folder}/offon_dqn/CartPole-v1.zip"),
+    ],
+)
+def test_enjoy_without_a_saved_model_is_one_line(
+    made: list[str], words: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys
+) -> None:
+    for name in made:
+        (tmp_path / name).mkdir()
+    arguments = ["--algo", "offon_dqn", "--env", "CartPole-v1", "-f", str(tmp_path), "--no-render", "-n", "10"]
+    monkeypatch.setattr(sys, "argv", ["sb3_offon.enjoy", *arguments])
+    with pytest.raises(SystemExit) as raised:
+        enjoy_main()
+    assert raised.value.code == 2
+    assert error_line(capsys) == (
+        f"python -m sb3_offon.enjoy: error: {words.format(folder=tmp_path)}; -f takes the folder that training's -f wrote"
+    )
+
+
+def test_enjoy_keeps_other_errors() -> None:
+    with pytest.raises(ValueError, match="something else"), replay_errors_in_one_line():
+        raise ValueError("something else")
+    with pytest.raises(AssertionError), replay_errors_in_one_line():
+        raise AssertionError("an assertion of the zoo's that is not about the model's folder")
 
 
 # --- an env whose actions the algorithm cannot take -------------------------------------------------------------------
