@@ -128,6 +128,24 @@ def test_enjoy_without_a_saved_model_is_one_line(
     )
 
 
+def test_enjoy_a_minatar_game_without_minatar_is_one_line(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys) -> None:
+    # A model saved where MinAtar was installed, replayed where it is not: the env is made before the model is loaded
+    (tmp_path / "qrdqn_nstep").mkdir()
+    (tmp_path / "qrdqn_nstep" / "MinAtar-Breakout-v0.zip").write_bytes(b"")
+    for module in [name for name in sys.modules if name == "minatar" or name.startswith("minatar.")]:
+        monkeypatch.delitem(sys.modules, module)
+    monkeypatch.setitem(sys.modules, "minatar", None)
+    arguments = ["--algo", "qrdqn_nstep", "--env", "MinAtar/Breakout-v0", "-f", str(tmp_path), "--no-render", "-n", "10"]
+    monkeypatch.setattr(sys, "argv", ["sb3_offon.enjoy", *arguments])
+    with pytest.raises(SystemExit) as raised:
+        enjoy_main()
+    assert raised.value.code == 1
+    assert error_line(capsys) == (
+        "python -m sb3_offon.enjoy: error: The MinAtar games need the optional 'minatar' dependencies (module 'minatar' "
+        'is missing): pip install -e ".[minatar]" in a clone of the source, or pip install "sb3-offon[minatar]"'
+    )
+
+
 def test_enjoy_keeps_other_errors() -> None:
     with pytest.raises(ValueError, match="something else"), replay_errors_in_one_line():
         raise ValueError("something else")
