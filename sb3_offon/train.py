@@ -200,10 +200,19 @@ class DescribedArgumentParser(argparse.ArgumentParser):
         :param value: the value given
         """
         if action.dest == "algo" and action.choices is not None and value not in action.choices:
-            close = difflib.get_close_matches(str(value), [str(choice) for choice in action.choices], n=3, cutoff=0.6)
+            names = [str(choice) for choice in action.choices]
+            # The class's name (``OffOnDQN``, ``QRDQN``) is the same name but for case and underscores: it comes first
+            same = [name for name in names if squeezed(name) == squeezed(str(value))]
+            close = same + [name for name in difflib.get_close_matches(str(value), names, n=3, cutoff=0.6) if name not in same]
+            close = close[:3]
             hint = f"close matches: {', '.join(close)}" if close else "no name is close to it"
             self.exit(2, f"{self.prog}: error: unknown --algo '{value}'; {hint} (--help lists them all)\n")
         super()._check_value(action, value)
+
+
+def squeezed(name: str) -> str:
+    """``name`` in lower case without underscores, hyphens or other punctuation: ``OffOnDQN`` and ``offon_dqn`` alike."""
+    return re.sub(r"[^a-z0-9]", "", name.lower())
 
 
 def describe_help(module: ModuleType, algos: dict[str, type], summaries: dict[str, str] | None = None) -> None:

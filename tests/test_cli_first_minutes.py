@@ -76,6 +76,12 @@ def test_an_unknown_algo_is_one_line_with_close_matches(monkeypatch: pytest.Monk
     assert error_line(capsys) == f"{PROG}: error: unknown --algo 'zzz'; no name is close to it (--help lists them all)"
 
 
+@pytest.mark.parametrize("typed, name", [("OffOnDQN", "offon_dqn"), ("OffOnQRDQN", "offon_qrdqn"), ("QRDQN", "qrdqn")])
+def test_a_class_name_for_algo_points_to_its_name(typed: str, name: str, monkeypatch: pytest.MonkeyPatch, capsys) -> None:
+    assert run(monkeypatch, "--algo", typed, "--env", "CartPole-v1") == 2
+    assert error_line(capsys).startswith(f"{PROG}: error: unknown --algo '{typed}'; close matches: {name}")
+
+
 def test_help_still_lists_the_algorithms(monkeypatch: pytest.MonkeyPatch, capsys) -> None:
     assert run(monkeypatch, "--help") == 0
     out = capsys.readouterr().out
