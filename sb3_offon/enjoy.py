@@ -13,12 +13,12 @@ import re
 import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
-from pathlib import Path
 from typing import Any
 
 from stable_baselines3.common.base_class import BaseAlgorithm
 
 from sb3_offon.extras import zoo_required
+from sb3_offon.train import prog
 
 # The zoo's words when ``-f``/``--exp-id``/``--load-*`` name no saved model (rl_zoo3.utils.get_model_path): an assertion
 # for a missing folder, a ValueError for a missing file
@@ -54,12 +54,6 @@ class ReplayLoader:
         return self.algo_class.load(path, **kwargs)
 
 
-def prog() -> str:
-    """The command's name as it was run: the console script's, else ``python -m sb3_offon.enjoy``."""
-    script = Path(sys.argv[0]).name if sys.argv else ""
-    return script if script.startswith("sb3-offon-enjoy") else "python -m sb3_offon.enjoy"
-
-
 @contextmanager
 def replay_errors_in_one_line(run_errors: tuple[type[BaseException], ...] = ()) -> Iterator[None]:
     """
@@ -75,10 +69,10 @@ def replay_errors_in_one_line(run_errors: tuple[type[BaseException], ...] = ()) 
     except (AssertionError, ValueError) as error:
         if not NO_MODEL.match(str(error)):
             raise
-        print(f"{prog()}: error: {error}; -f takes the folder that training's -f wrote", file=sys.stderr)
+        print(f"{prog('enjoy')}: error: {error}; -f takes the folder that training's -f wrote", file=sys.stderr)
         raise SystemExit(2) from None
     except run_errors as error:
-        print(f"{prog()}: error: {error}", file=sys.stderr)
+        print(f"{prog('enjoy')}: error: {error}", file=sys.stderr)
         raise SystemExit(1) from None
 
 

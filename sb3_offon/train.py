@@ -51,10 +51,14 @@ UNKNOWN_ENV = re.compile(r"^(?P<env>\S+) not found in gym registry")
 INTERRUPTED = 130
 
 
-def prog() -> str:
-    """The command's name as it was run: the console script's, else ``python -m sb3_offon.train``."""
+def prog(command: str = "train") -> str:
+    """
+    The command's name as it was run: the console script's, else ``python -m sb3_offon.<command>``.
+
+    :param command: ``train`` or ``enjoy``
+    """
     script = Path(sys.argv[0]).name if sys.argv else ""
-    return script if script.startswith("sb3-offon-train") else "python -m sb3_offon.train"
+    return script if script.startswith(f"sb3-offon-{command}") else f"python -m sb3_offon.{command}"
 
 
 def help_description(algos: dict[str, type], summaries: dict[str, str] | None = None) -> str:
