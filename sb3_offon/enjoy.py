@@ -55,13 +55,11 @@ class ReplayLoader:
 
 
 @contextmanager
-def replay_errors_in_one_line(run_errors: tuple[type[BaseException], ...] = ()) -> Iterator[None]:
+def no_model_in_one_line() -> Iterator[None]:
     """
     Turn "no saved model there" (a wrong ``-f``, ``--algo``, ``--env`` or ``--exp-id``; the zoo asserts or raises a
-    ``ValueError`` with a traceback) into one line on stderr with exit status 2, and ``run_errors`` (MinAtar not
-    installed) into one line with exit status 1. Any other error keeps its traceback.
+    ``ValueError`` with a traceback) into one line on stderr with exit status 2. Any other error keeps its traceback.
 
-    :param run_errors: the errors whose message is the whole report
     :raises SystemExit: after printing the line
     """
     try:
@@ -71,9 +69,6 @@ def replay_errors_in_one_line(run_errors: tuple[type[BaseException], ...] = ()) 
             raise
         print(f"{prog('enjoy')}: error: {error}; -f takes the folder that training's -f wrote", file=sys.stderr)
         raise SystemExit(2) from None
-    except run_errors as error:
-        print(f"{prog('enjoy')}: error: {error}", file=sys.stderr)
-        raise SystemExit(1) from None
 
 
 def main() -> None:
@@ -84,7 +79,7 @@ def main() -> None:
 
         from sb3_offon.cli_args import use_tolerant_store_dict
         from sb3_offon.minatar_envs import MinAtarNotInstalledError
-        from sb3_offon.train import one_thread_by_default
+        from sb3_offon.train import one_thread_by_default, run_errors_in_one_line
         from sb3_offon.zoo import ALGOS, register
     register()
     # ``--env-kwargs key:word``: unquoted strings, as for training
@@ -93,7 +88,8 @@ def main() -> None:
     sys.argv[1:] = one_thread_by_default(sys.argv[1:])
     # A copy for enjoy alone: training keeps the real classes
     zoo_enjoy.ALGOS = {**zoo_enjoy.ALGOS, **{name: ReplayLoader(cls) for name, cls in ALGOS.items()}}  # type: ignore[assignment,misc]
-    with replay_errors_in_one_line((MinAtarNotInstalledError,)):
+    # MinAtar not installed where a MinAtar model is replayed: one line, as for training
+    with no_model_in_one_line(), run_errors_in_one_line((), (MinAtarNotInstalledError,), command="enjoy"):
         zoo_enjoy.enjoy()
 
 

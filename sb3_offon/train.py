@@ -207,8 +207,8 @@ class DescribedArgumentParser(argparse.ArgumentParser):
             names = [str(choice) for choice in action.choices]
             # The class's name (``OffOnDQN``, ``QRDQN``) is the same name but for case and underscores: it comes first
             same = [name for name in names if squeezed(name) == squeezed(str(value))]
-            close = same + [name for name in difflib.get_close_matches(str(value), names, n=3, cutoff=0.6) if name not in same]
-            close = close[:3]
+            similar = difflib.get_close_matches(str(value), names, n=3, cutoff=0.6)
+            close = (same + [name for name in similar if name not in same])[:3]
             hint = f"close matches: {', '.join(close)}" if close else "no name is close to it"
             self.exit(2, f"{self.prog}: error: unknown --algo '{value}'; {hint} (--help lists them all)\n")
         super()._check_value(action, value)
@@ -376,22 +376,25 @@ def interruption_line(argv: list[str], interruption: KeyboardInterrupt) -> str:
 
 @contextmanager
 def run_errors_in_one_line(
-    usage_errors: tuple[type[BaseException], ...], run_errors: tuple[type[BaseException], ...]
+    usage_errors: tuple[type[BaseException], ...], run_errors: tuple[type[BaseException], ...], command: str = "train"
 ) -> Iterator[None]:
     """
     Turn the errors that say what to change in a line (an unknown hyperparameter, a checkpoint that cannot be resumed,
     a non-finite reward or loss, MinAtar not installed) into that line on stderr: exit status 2 for ``usage_errors``
     (as argparse's), 1 for ``run_errors`` (the run failed).
 
+    :param usage_errors: the errors of the command as typed
+    :param run_errors: the errors of the run
+    :param command: the command whose name the line starts with (see :func:`prog`)
     :raises SystemExit: after printing the line
     """
     try:
         yield
     except usage_errors as error:
-        print(f"{prog()}: error: {error}", file=sys.stderr)
+        print(f"{prog(command)}: error: {error}", file=sys.stderr)
         raise SystemExit(2) from None
     except run_errors as error:
-        print(f"{prog()}: error: {error}", file=sys.stderr)
+        print(f"{prog(command)}: error: {error}", file=sys.stderr)
         raise SystemExit(1) from None
 
 

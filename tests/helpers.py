@@ -1,6 +1,7 @@
 """Checks that several test modules share (pytest puts this folder on the import path; it collects no tests here)."""
 
 import importlib.util
+import sys
 from pathlib import Path
 from types import ModuleType
 
@@ -19,6 +20,14 @@ def assert_same_parameters(ours: BaseAlgorithm, reference: BaseAlgorithm) -> Non
         ours.policy.state_dict().items(), reference.policy.state_dict().items(), strict=True
     ):
         assert th.equal(ours_param, reference_param), name
+
+
+def hide_minatar(monkeypatch: pytest.MonkeyPatch) -> None:
+    """MinAtar absent for the test: its modules out of the cache, and its import made to fail as an uninstalled
+    package's does."""
+    for module in [name for name in sys.modules if name == "minatar" or name.startswith("minatar.")]:
+        monkeypatch.delitem(sys.modules, module)
+    monkeypatch.setitem(sys.modules, "minatar", None)
 
 
 def load_script(name: str) -> ModuleType:

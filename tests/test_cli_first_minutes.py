@@ -17,13 +17,13 @@ from pathlib import Path
 
 import pytest
 from gymnasium import spaces
-from helpers import interrupt_after_checkpoint
+from helpers import hide_minatar, interrupt_after_checkpoint
 from rl_zoo3.exp_manager import ExperimentManager
 from stable_baselines3 import DQN, PPO
 
 from sb3_offon import OffOnDQN, OffOnQRDQN
 from sb3_offon.enjoy import main as enjoy_main
-from sb3_offon.enjoy import replay_errors_in_one_line
+from sb3_offon.enjoy import no_model_in_one_line
 from sb3_offon.resume import Checkpoint
 from sb3_offon.train import INTERRUPTED, interruption_line, main, resume_command
 from sb3_offon.zoo import ALGOS, OffOnExperimentManager
@@ -38,6 +38,11 @@ from sb3_offon.zoo_checks import (
 PROG = "python -m sb3_offon.train"
 # A short run: learning starts within it, a few gradient steps per 50 env steps; checkpoints at rollout starts (every 50)
 SHORT = ["--eval-freq", "-1", "--seed", "0", "--hyperparams", "learning_starts:100", "train_freq:50", "gradient_steps:2"]
+# What a MinAtar id says without MinAtar installed, as written out (a changed word here is a changed message)
+MINATAR_MISSING = (
+    "The MinAtar games need the optional 'minatar' dependencies (module 'minatar' is missing): "
+    'pip install -e ".[minatar]" in a clone of the source, or pip install "sb3-offon[minatar]"'
+)
 
 
 def run(monkeypatch: pytest.MonkeyPatch, *arguments: str) -> int | str | None:
@@ -47,6 +52,14 @@ def run(monkeypatch: pytest.MonkeyPatch, *arguments: str) -> int | str | None:
         return main()
     except SystemExit as exit_:
         return exit_.code
+
+
+def run_enjoy(monkeypatch: pytest.MonkeyPatch, *arguments: str) -> int | str | None:
+    """``sb3_offon.enjoy``'s ``main()`` on ``arguments``, without rendering: the status of the ``SystemExit`` it ends with."""
+    monkeypatch.setattr(sys, "argv", ["sb3_offon.enjoy", *arguments, "--no-render", "-n", "10"])
+    with pytest.raises(SystemExit) as raised:
+        enjoy_main()
+    return raised.value.code
 
 
 def no_training(monkeypatch: pytest.MonkeyPatch) -> list:
@@ -98,15 +111,10 @@ def test_help_still_lists_the_algorithms(monkeypatch: pytest.MonkeyPatch, capsys
 def test_a_minatar_game_without_minatar_is_one_line(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys) -> None:
     # The README's pick for MinAtar-like games, on an install with the zoo extra only: MinAtar's import fails as an
     # uninstalled package's does
-    for module in [name for name in sys.modules if name == "minatar" or name.startswith("minatar.")]:
-        monkeypatch.delitem(sys.modules, module)
-    monkeypatch.setitem(sys.modules, "minatar", None)
+    hide_minatar(monkeypatch)
     no_training(monkeypatch)
     assert run(monkeypatch, "--algo", "qrdqn_nstep", "--env", "MinAtar/Breakout-v0", "-f", str(tmp_path)) == 1
-    assert error_line(capsys) == (
-        f"{PROG}: error: The MinAtar games need the optional 'minatar' dependencies (module 'minatar' is missing): "
-        'pip install -e ".[minatar]" in a clone of the source, or pip install "sb3-offon[minatar]"'
-    )
+    assert error_line(capsys) == f"{PROG}: error: {MINATAR_MISSING}"
 
 
 # --- replaying from a folder with no saved model -----------------------------------------------------------------------
@@ -124,11 +132,7 @@ def test_enjoy_without_a_saved_model_is_one_line(
 ) -> None:
     for name in made:
         (tmp_path / name).mkdir()
-    arguments = ["--algo", "offon_dqn", "--env", "CartPole-v1", "-f", str(tmp_path), "--no-render", "-n", "10"]
-    monkeypatch.setattr(sys, "argv", ["sb3_offon.enjoy", *arguments])
-    with pytest.raises(SystemExit) as raised:
-        enjoy_main()
-    assert raised.value.code == 2
+    assert run_enjoy(monkeypatch, "--algo", "offon_dqn", "--env", "CartPole-v1", "-f", str(tmp_path)) == 2
     assert error_line(capsys) == (
         f"python -m sb3_offon.enjoy: error: {words.format(folder=tmp_path)}; -f takes the folder that training's -f wrote"
     )
@@ -138,24 +142,15 @@ def test_enjoy_a_minatar_game_without_minatar_is_one_line(tmp_path: Path, monkey
     # A model saved where MinAtar was installed, replayed where it is not: the env is made before the model is loaded
     (tmp_path / "qrdqn_nstep").mkdir()
     (tmp_path / "qrdqn_nstep" / "MinAtar-Breakout-v0.zip").write_bytes(b"")
-    for module in [name for name in sys.modules if name == "minatar" or name.startswith("minatar.")]:
-        monkeypatch.delitem(sys.modules, module)
-    monkeypatch.setitem(sys.modules, "minatar", None)
-    arguments = ["--algo", "qrdqn_nstep", "--env", "MinAtar/Breakout-v0", "-f", str(tmp_path), "--no-render", "-n", "10"]
-    monkeypatch.setattr(sys, "argv", ["sb3_offon.enjoy", *arguments])
-    with pytest.raises(SystemExit) as raised:
-        enjoy_main()
-    assert raised.value.code == 1
-    assert error_line(capsys) == (
-        "python -m sb3_offon.enjoy: error: The MinAtar games need the optional 'minatar' dependencies (module 'minatar' "
-        'is missing): pip install -e ".[minatar]" in a clone of the source, or pip install "sb3-offon[minatar]"'
-    )
+    hide_minatar(monkeypatch)
+    assert run_enjoy(monkeypatch, "--algo", "qrdqn_nstep", "--env", "MinAtar/Breakout-v0", "-f", str(tmp_path)) == 1
+    assert error_line(capsys) == f"python -m sb3_offon.enjoy: error: {MINATAR_MISSING}"
 
 
 def test_enjoy_keeps_other_errors() -> None:
-    with pytest.raises(ValueError, match="something else"), replay_errors_in_one_line():
+    with pytest.raises(ValueError, match="something else"), no_model_in_one_line():
         raise ValueError("something else")
-    with pytest.raises(AssertionError), replay_errors_in_one_line():
+    with pytest.raises(AssertionError), no_model_in_one_line():
         raise AssertionError("an assertion of the zoo's that is not about the model's folder")
 
 

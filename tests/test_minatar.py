@@ -2,7 +2,6 @@
 
 import importlib
 import inspect
-import sys
 import warnings
 from pathlib import Path
 
@@ -11,6 +10,7 @@ import numpy as np
 import pytest
 import torch as th
 import yaml
+from helpers import hide_minatar
 from sb3_contrib import QRDQN
 from stable_baselines3 import DQN
 from stable_baselines3.common.env_util import make_vec_env
@@ -71,10 +71,7 @@ def test_minimal_action_set_maps_to_the_game_actions() -> None:
 
 
 def test_missing_extra_names_it(monkeypatch: pytest.MonkeyPatch) -> None:
-    # MinAtar absent: its modules out of the cache, and its import made to fail as an uninstalled package's does
-    for module in [name for name in sys.modules if name == "minatar" or name.startswith("minatar.")]:
-        monkeypatch.delitem(sys.modules, module)
-    monkeypatch.setitem(sys.modules, "minatar", None)
+    hide_minatar(monkeypatch)
     with pytest.raises(ModuleNotFoundError, match=r"'minatar' dependencies.*pip install -e \"\.\[minatar\]\""):
         gym.make("MinAtar/Breakout-v0")
 
