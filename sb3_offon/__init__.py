@@ -3,6 +3,7 @@
 from pathlib import Path
 
 from sb3_offon import (
+    atari,  # noqa: F401  (registers the ALE's ids when ale-py is installed)
     envs,  # noqa: F401  (registers CartPoleFallPenalty-v1 and MountainCarGoalBonus-v0)
     minatar_envs,  # noqa: F401  (registers the MinAtar/* ids)
 )
@@ -22,7 +23,7 @@ from sb3_offon.common.prioritized_buffers import (
 from sb3_offon.offon_dqn import CnnPolicy, MlpPolicy, MultiInputPolicy, OffOnDQN
 from sb3_offon.offon_qrdqn import OffOnQRDQN
 from sb3_offon.presets import LAMBDA_CHOICE_TARGETS, PAPER_TARGETS
-from sb3_offon.torch_layers import MinAtarCNN
+from sb3_offon.torch_layers import DataEfficientCNN, MinAtarCNN
 from sb3_offon.variants import DQNMC, DQNSarsa
 
 # The version is written once, in version.txt (read by setuptools too, see pyproject.toml)
@@ -34,6 +35,7 @@ __all__ = [
     "PAPER_TARGETS",
     "CnnPolicy",
     "DQNSarsa",
+    "DataEfficientCNN",
     "MinAtarCNN",
     "MlpPolicy",
     "MultiInputPolicy",

@@ -416,6 +416,7 @@ def main() -> int:
         from sb3_offon.resume import CheckpointError
         from sb3_offon.zoo import ALGO_SUMMARIES, ALGOS, register
         from sb3_offon.zoo_checks import (
+            AtariSettingsNote,
             DefaultHyperparametersWarning,
             HyperparameterError,
             UnknownHyperparameterError,
@@ -434,7 +435,7 @@ def main() -> int:
     one_line = run_errors_in_one_line(usage_errors, (NonFiniteError, MinAtarNotInstalledError))
     try:
         with one_line, argument_errors_in_one_line(), unknown_env_in_one_line():
-            with warnings_in_one_line((DefaultHyperparametersWarning,)):
+            with warnings_in_one_line((DefaultHyperparametersWarning, AtariSettingsNote)):
                 zoo_train.train()
     except KeyboardInterrupt as interruption:
         print(interruption_line(typed, interruption), file=sys.stderr)

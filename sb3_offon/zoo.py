@@ -35,6 +35,7 @@ import rl_zoo3.hyperparams_opt as zoo_hyperparams_opt
 import rl_zoo3.train as zoo_train
 import rl_zoo3.utils as zoo_utils
 import yaml
+from rl_zoo3.utils import get_wrapper_class
 from rl_zoo3.exp_manager import ExperimentManager
 from rl_zoo3.hyperparams_opt import convert_offpolicy_params
 from stable_baselines3 import DQN
@@ -44,7 +45,9 @@ from stable_baselines3.common.vec_env import VecEnv
 
 # Registers CartPoleFallPenalty-v1 and MountainCarGoalBonus-v0 (also done by ``import sb3_offon``)
 import sb3_offon.envs  # noqa: F401
+from sb3_offon.atari import ale_v5_kwargs
 from sb3_offon.common.non_finite import NonFiniteCheck, NonFiniteChecksMixin
+from sb3_offon.evaluation import EpsilonGreedyEvalCallback, final_evaluation
 from sb3_offon.common.prioritized_buffers import PRIORITIZED_BUFFERS
 from sb3_offon.offon_dqn import OffOnDQN
 from sb3_offon.offon_qrdqn import OffOnQRDQN
@@ -57,11 +60,12 @@ from sb3_offon.resume import (
     joined_monitor,
     n_step_reload_unflagged,
 )
-from sb3_offon.torch_layers import MinAtarCNN
+from sb3_offon.torch_layers import DataEfficientCNN, MinAtarCNN
 from sb3_offon.tuning import SAMPLERS as SAMPLERS_BY_NAME
 from sb3_offon.variants import DQNMC, DQNSarsa
 from sb3_offon.zoo_checks import (
     HYPERPARAMS_DIR,
+    AtariSettingsNote,
     DefaultHyperparametersWarning,
     HyperparameterError,
     RunInterrupted,
@@ -180,6 +184,10 @@ class OffOnExperimentManager(ExperimentManager):
         self.default_settings: str | None = None
         # The step at which Ctrl-C stopped training (None: it was not)
         self.interrupted_at: int | None = None
+        # The evaluation keys of a settings file (EVALUATION_KEYS): None where it has none
+        self.eval_exploration_rate: float | None = None
+        self.eval_env_wrapper: Any = None
+        self.final_eval_episodes: int | None = None
 
     def setup_experiment(self) -> tuple[BaseAlgorithm, dict[str, Any]] | None:
         """
@@ -270,11 +278,33 @@ class OffOnExperimentManager(ExperimentManager):
                 f"trains {budget} (-n): a resumed run keeps its budget"
             )
 
+    def _preprocess_hyperparams(self, hyperparams: dict[str, Any]) -> tuple[dict[str, Any], Any, Any, Any]:
+        """
+        The zoo's preprocessing, after taking out the evaluation keys of a settings file (:data:`EVALUATION_KEYS`:
+        ``eval_exploration_rate``, ``eval_env_wrapper``, ``final_eval_episodes``), which are not the algorithm's; and
+        an ``ALE/<Game>-v5`` id under an env wrapper made the ``NoFrameskip-v4`` game (:func:`sb3_offon.atari.ale_v5_kwargs`),
+        said in one line.
+        """
+        self.eval_exploration_rate = hyperparams.pop("eval_exploration_rate", None)
+        wrapper = hyperparams.pop("eval_env_wrapper", None)
+        self.eval_env_wrapper = None if wrapper is None else get_wrapper_class({"env_wrapper": wrapper})
+        episodes = hyperparams.pop("final_eval_episodes", None)
+        self.final_eval_episodes = None if episodes is None else int(episodes)
+        results = super()._preprocess_hyperparams(hyperparams)
+        if results[1] is not None:  # an env wrapper: AtariWrapper on an Atari id
+            eval_separate = self.eval_env_kwargs is not self.env_kwargs
+            self.env_kwargs, note = ale_v5_kwargs(self.env_name.gym_id, self.env_kwargs)
+            self.eval_env_kwargs = ale_v5_kwargs(self.env_name.gym_id, self.eval_env_kwargs)[0] if eval_separate else self.env_kwargs
+            if note is not None:
+                warnings.warn(note, AtariSettingsNote, stacklevel=2)
+        return results
+
     def create_envs(self, n_envs: int, eval_env: bool = False, no_log: bool = False) -> VecEnv:
         """
         The zoo's envs (training or evaluation), their action space checked against the algorithm's
         (:func:`check_action_space`) as soon as the first is made, before the model: SB3 would refuse it there with
-        an assertion's traceback.
+        an assertion's traceback. Evaluation envs are wrapped in the settings' ``eval_env_wrapper`` where they give one
+        (the Atari 100k settings: whole games), in place of ``env_wrapper``.
 
         :param n_envs: the number of envs
         :param eval_env: whether they are for evaluation
@@ -282,7 +312,13 @@ class OffOnExperimentManager(ExperimentManager):
         :return: the vectorised envs
         :raises UnsupportedActionSpaceError: in a line, the envs closed
         """
-        env = super().create_envs(n_envs, eval_env=eval_env, no_log=no_log)
+        training_wrapper = self.env_wrapper
+        if eval_env and self.eval_env_wrapper is not None:
+            self.env_wrapper = self.eval_env_wrapper
+        try:
+            env = super().create_envs(n_envs, eval_env=eval_env, no_log=no_log)
+        finally:
+            self.env_wrapper = training_wrapper
         try:
             check_action_space(self.algo, zoo_utils.ALGOS[self.algo], self.env_name.gym_id, env.action_space)
         except UnsupportedActionSpaceError:
@@ -302,6 +338,19 @@ class OffOnExperimentManager(ExperimentManager):
         after a non-finite reward or loss.
         """
         super().create_callbacks()
+        zoo_eval = self._eval_callback()
+        if zoo_eval is not None and self.eval_exploration_rate is not None:
+            # The settings' evaluation policy (epsilon-greedy at eval_exploration_rate) instead of the zoo's
+            self.callbacks[self.callbacks.index(zoo_eval)] = EpsilonGreedyEvalCallback(
+                zoo_eval.eval_env,
+                exploration_rate=float(self.eval_exploration_rate),
+                seed=self.seed,
+                callback_on_new_best=zoo_eval.callback_on_new_best,
+                best_model_save_path=zoo_eval.best_model_save_path,
+                n_eval_episodes=zoo_eval.n_eval_episodes,
+                log_path=self.save_path,
+                eval_freq=zoo_eval.eval_freq,
+            )
         if not issubclass(zoo_utils.ALGOS[self.algo], NonFiniteChecksMixin):
             self.callbacks.insert(0, NonFiniteCheck())
         if self.checkpoint_freq > 0:
@@ -377,8 +426,35 @@ class OffOnExperimentManager(ExperimentManager):
         if stopped_by:
             record = {"num_timesteps": int(model.num_timesteps), "callback": type(stopped_by[0]).__name__}
             (Path(self.save_path) / STOPPED_FILE).write_text(json.dumps(record, indent=2) + "\n")
+        if self.final_eval_episodes and model.num_timesteps >= self.n_timesteps and self.interrupted_at is None:
+            self.evaluate_final(model)
         if self.checkpoint_freq > 0 and (model.num_timesteps >= self.n_timesteps or stopped_by):
             shutil.rmtree(self.checkpoint_dir, ignore_errors=True)
+
+    def evaluate_final(self, model: BaseAlgorithm) -> None:
+        """
+        The settings' score after training (``final_eval_episodes`` episodes of one evaluation env, epsilon-greedy at
+        ``eval_exploration_rate``, 0 where the settings give none), into ``final_evaluation.npz`` in the run's folder
+        (:func:`sb3_offon.evaluation.final_evaluation`), before the checkpoints are removed.
+        """
+        assert self.final_eval_episodes is not None
+        env = self.create_envs(1, eval_env=True)
+        try:
+            record = final_evaluation(
+                model,
+                env,
+                self.final_eval_episodes,
+                float(self.eval_exploration_rate or 0.0),
+                self.save_path,
+                seed=None if self.seed is None else self.seed + 1,
+            )
+        finally:
+            env.close()
+        returns = record["results"]
+        print(
+            f"Final evaluation: {len(returns)} episodes, mean return {returns.mean():.2f} +/- {returns.std():.2f} "
+            f"({record['wall_time_s']:.0f} s)"
+        )
 
     def save_trained_model(self, model: BaseAlgorithm) -> None:
         """
@@ -417,6 +493,7 @@ def register() -> None:
     # The zoo evaluates a YAML file's `policy_kwargs` string in the namespace of its exp_manager module (which has
     # `th` and `nn`): the MinAtar entries' "dict(features_extractor_class=MinAtarCNN, ...)" finds the class there
     zoo_exp_manager.MinAtarCNN = MinAtarCNN  # type: ignore[attr-defined]
+    zoo_exp_manager.DataEfficientCNN = DataEfficientCNN  # type: ignore[attr-defined]
     # Likewise a `replay_buffer_class` given by name (``--hyperparams replay_buffer_class:PrioritizedOffOnReplayBuffer``)
     for buffer_class in PRIORITIZED_BUFFERS:
         setattr(zoo_exp_manager, buffer_class.__name__, buffer_class)

@@ -32,6 +32,15 @@ ZOO_KEYS = frozenset(
 )  # fmt: skip
 
 
+# Keys of this package's settings files that are neither the zoo's nor the algorithm's: how the run is evaluated
+# (OffOnExperimentManager takes them out before the model is made; the Atari 100k settings use them)
+EVALUATION_KEYS = frozenset({"eval_exploration_rate", "eval_env_wrapper", "final_eval_episodes"})
+
+
+class AtariSettingsNote(UserWarning):
+    """What the command line set so that an Atari id runs as its settings expect (an ``ALE/<Game>-v5`` id's frame skip)."""
+
+
 class UnknownHyperparameterError(ValueError):
     """A hyperparameter (YAML entry or ``--hyperparams``) that is neither the zoo's nor an argument of the algorithm."""
 
@@ -161,12 +170,12 @@ def constructor_arguments(algo_class: type) -> set[str] | None:
 def check_hyperparameter_names(algo: str, algo_class: type, hyperparams: dict[str, Any]) -> None:
     """
     :raises UnknownHyperparameterError: naming the first key of ``hyperparams`` that is neither one of :data:`ZOO_KEYS`
-        nor an argument of ``algo_class``, with the close matches
+        nor one of :data:`EVALUATION_KEYS` nor an argument of ``algo_class``, with the close matches
     """
     arguments = constructor_arguments(algo_class)
     if arguments is None:
         return
-    known = arguments | ZOO_KEYS
+    known = arguments | ZOO_KEYS | EVALUATION_KEYS
     for key in hyperparams:
         if key not in known:
             close = difflib.get_close_matches(key, sorted(known), n=3, cutoff=0.6)

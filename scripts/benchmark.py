@@ -326,12 +326,15 @@ def code_version() -> dict[str, str]:
 
 def run_order(specs: list[dict]) -> list[dict]:
     """
-    Seed by seed, and within a seed the longest runs first.
+    Seed by seed, within a seed the longest runs first, and among runs of one length env by env (every algorithm of
+    an env, in the grid's order, before the next env).
 
     An interrupted grid then holds whole seeds (every algorithm and env of seeds 0..k), which compare fairly, rather
-    than every seed of the first algorithms; and within a seed, long runs first make the grid end sooner.
+    than every seed of the first algorithms; within a seed, long runs first make the grid end sooner; and the runs of
+    an env end close together, so that a seed half done already compares the algorithms on some envs.
     """
-    return sorted(specs, key=lambda spec: (spec["seed"], -spec["n_timesteps"]))
+    envs = list(dict.fromkeys(spec["env"] for spec in specs))
+    return sorted(specs, key=lambda spec: (spec["seed"], -spec["n_timesteps"], envs.index(spec["env"])))
 
 
 # ----------------------------------------------------------------------------------------------------------------------

@@ -16,6 +16,7 @@ import yaml
 # run_records.py and study_file.py sit next to this module: importable however it is loaded
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from run_records import checkpoint_dir
+from sb3_offon.atari import looks_like_atari
 from study_file import Study
 
 
@@ -77,10 +78,12 @@ def build_specs(args: argparse.Namespace) -> list[dict]:
             raise SystemExit(f"No hyperparameter file {path} for --algo {algo} in the '{args.set}' set")
         entries = yaml.safe_load(path.read_text())
         for env in args.envs:
-            if env not in entries:
+            # An Atari game without an entry of its own reads the set's `atari` entry, as the zoo does
+            entry = entries.get(env, entries.get("atari") if looks_like_atari(env) else None)
+            if entry is None:
                 known = sorted(key for key in entries if key not in ("default", "atari"))
                 raise SystemExit(f"{path} has no entry for {env}: {known}")
-            yaml_budget = int(float(entries[env]["n_timesteps"]))
+            yaml_budget = int(float(entry["n_timesteps"]))
             n_timesteps = args.n_timesteps or yaml_budget
             eval_freq = args.eval_freq or max(n_timesteps // args.n_evals, 1)
             if eval_freq > n_timesteps:
@@ -88,7 +91,7 @@ def build_specs(args: argparse.Namespace) -> list[dict]:
             hyperparams = list(args.hyperparams)
             # The paper's epsilon reaches its final value at a fixed timestep (exploration_fraction = 1919 / budget
             # in the YAML): keep that timestep when the budget is overridden (the YAML's own instruction)
-            fraction = entries[env].get("exploration_fraction")
+            fraction = entry.get("exploration_fraction")
             overridden = any(item.startswith("exploration_fraction:") for item in hyperparams)
             if args.set != "tuned" and n_timesteps != yaml_budget and fraction is not None and not overridden:
                 hyperparams.append(f"exploration_fraction:{min(1.0, float(fraction) * yaml_budget / n_timesteps):.6g}")
@@ -105,7 +108,7 @@ def build_specs(args: argparse.Namespace) -> list[dict]:
                         "eval_freq": eval_freq,
                         "eval_episodes": args.eval_episodes,
                         "hyperparams": hyperparams,
-                        "device": args.device or default_device(entries[env].get("policy", "MlpPolicy")),
+                        "device": args.device or default_device(entry.get("policy", "MlpPolicy")),
                         "threads": args.threads,
                         "timeout": args.timeout,
                         "checkpoint_freq": eval_freq if args.checkpoint_freq is None else args.checkpoint_freq,
