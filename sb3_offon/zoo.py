@@ -35,9 +35,9 @@ import rl_zoo3.hyperparams_opt as zoo_hyperparams_opt
 import rl_zoo3.train as zoo_train
 import rl_zoo3.utils as zoo_utils
 import yaml
-from rl_zoo3.utils import get_wrapper_class
 from rl_zoo3.exp_manager import ExperimentManager
 from rl_zoo3.hyperparams_opt import convert_offpolicy_params
+from rl_zoo3.utils import get_wrapper_class
 from stable_baselines3 import DQN
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import EvalCallback
@@ -47,8 +47,8 @@ from stable_baselines3.common.vec_env import VecEnv
 import sb3_offon.envs  # noqa: F401
 from sb3_offon.atari import ale_v5_kwargs
 from sb3_offon.common.non_finite import NonFiniteCheck, NonFiniteChecksMixin
-from sb3_offon.evaluation import EpsilonGreedyEvalCallback, final_evaluation
 from sb3_offon.common.prioritized_buffers import PRIORITIZED_BUFFERS
+from sb3_offon.evaluation import EpsilonGreedyEvalCallback, final_evaluation
 from sb3_offon.offon_dqn import OffOnDQN
 from sb3_offon.offon_qrdqn import OffOnQRDQN
 from sb3_offon.qrdqn import QRDQN
@@ -294,7 +294,9 @@ class OffOnExperimentManager(ExperimentManager):
         if results[1] is not None:  # an env wrapper: AtariWrapper on an Atari id
             eval_separate = self.eval_env_kwargs is not self.env_kwargs
             self.env_kwargs, note = ale_v5_kwargs(self.env_name.gym_id, self.env_kwargs)
-            self.eval_env_kwargs = ale_v5_kwargs(self.env_name.gym_id, self.eval_env_kwargs)[0] if eval_separate else self.env_kwargs
+            self.eval_env_kwargs = (
+                ale_v5_kwargs(self.env_name.gym_id, self.eval_env_kwargs)[0] if eval_separate else self.env_kwargs
+            )
             if note is not None:
                 warnings.warn(note, AtariSettingsNote, stacklevel=2)
         return results

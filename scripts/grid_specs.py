@@ -16,8 +16,9 @@ import yaml
 # run_records.py and study_file.py sit next to this module: importable however it is loaded
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from run_records import checkpoint_dir
-from sb3_offon.atari import looks_like_atari
 from study_file import Study
+
+from sb3_offon.atari import looks_like_atari
 
 
 def hyperparams_dir() -> Path:

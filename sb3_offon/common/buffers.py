@@ -10,6 +10,8 @@ from stable_baselines3.common.buffers import DictReplayBuffer, NStepReplayBuffer
 from stable_baselines3.common.type_aliases import TensorDict
 from stable_baselines3.common.vec_env import VecNormalize
 
+from sb3_offon.common.stored_rows import StoredRows
+
 # Maps the (unnormalised) final observations of truncated episodes, batched, to their state values
 # max_a Q_target(s_T, a). Set by OffOnDQN; never pickled with the buffer.
 TruncationValueFn = Callable[[np.ndarray | dict[str, np.ndarray]], np.ndarray]
@@ -396,7 +398,8 @@ class OffOnBufferMixin:
             them), ``discounts`` (gamma^k), ``next_actions`` (at e; -1: the episode did not go on from e, always the
             case when k < n_steps), ``terminated`` (e ended its episode by termination, not by a time limit),
             ``running_newest`` (e is the newest transition of an episode still running), ``next_observations``
-            (s_{t+k}, normalised as ``sample()`` normalises them), ``lengths`` (k)
+            (s_{t+k}, normalised as ``sample()`` normalises them, as :class:`sb3_offon.common.stored_rows.StoredRows`:
+            read chunk by chunk, never all at once unless asked), ``lengths`` (k)
         """
         wanted = np.full(len(slots), self.n_steps) if lengths is None else np.asarray(lengths, dtype=np.int64)
         n_steps = int(wanted.max()) if len(wanted) else 1
@@ -411,12 +414,11 @@ class OffOnBufferMixin:
         ends = window[np.arange(len(slots)), lengths - 1]
         window_rewards = self._normalize_reward(self.rewards[window, envs[:, None]], env)  # type: ignore[attr-defined]
         rewards = np.where(offsets < lengths[:, None], window_rewards * gamma**offsets, 0.0).sum(axis=1)
+        # Where the next observations are, read chunk by chunk by whoever passes them through a network
         if self.optimize_memory_usage:
-            next_obs = self.observations[(ends + 1) % self.buffer_size, envs]
-        elif isinstance(self.next_observations, dict):
-            next_obs = {key: value[ends, envs] for key, value in self.next_observations.items()}
+            next_obs = StoredRows(self.observations, (ends + 1) % self.buffer_size, envs, self._normalizer(env))
         else:
-            next_obs = self.next_observations[ends, envs]
+            next_obs = StoredRows(self.next_observations, ends, envs, self._normalizer(env))
         dones = self.dones[ends, envs]  # type: ignore[attr-defined]
         timeouts = self.timeouts[ends, envs]  # type: ignore[attr-defined]
         newest_slot = (self.pos - 1) % self.buffer_size
@@ -428,8 +430,12 @@ class OffOnBufferMixin:
             "next_actions": self.next_actions[ends, envs],
             "terminated": (dones * (1 - timeouts)) > 0,
             "running_newest": (ends == newest_slot) & running[envs],
-            "next_observations": self._normalize_obs(next_obs, env),  # type: ignore[attr-defined]
+            "next_observations": next_obs,
         }
+
+    def _normalizer(self, env: VecNormalize | None) -> Callable[[Any], Any]:
+        """What ``sample()`` applies to observations: ``env``'s normalisation, or nothing."""
+        return lambda observations: self._normalize_obs(observations, env)  # type: ignore[attr-defined]
 
     def observations_and_actions(
         self, slots: np.ndarray, envs: np.ndarray, env: VecNormalize | None = None

@@ -233,7 +233,9 @@ class LambdaRefreshMixin:
         """
         ``forward`` (the target network's pass, under ``no_grad``) over a batch of (normalised) observations in the
         buffer's layout, in chunks of :meth:`_lambda_forward_rows` rows; each of its outputs concatenated over the chunks,
-        left on the device (empty list for no observations).
+        left on the device (empty list for no observations). The observations may be an array (or a dict of them) or
+        :class:`sb3_offon.common.stored_rows.StoredRows`, which gathers each chunk's rows from the buffer as it is read,
+        into one array reused by every chunk: the pass then holds one chunk of observations at a time.
         """
         first = next(iter(observations.values())) if isinstance(observations, dict) else observations
         rows_per_chunk = self._lambda_forward_rows()

@@ -190,7 +190,7 @@ class PrioritizedBufferMixin(OffOnBufferMixin):
         columns: dict[str, Any] = dict(
             observations=observations,
             actions=actions,
-            next_observations=inputs["next_observations"],
+            next_observations=inputs["next_observations"].array(),  # a minibatch's: uploaded with the other columns
             dones=inputs["terminated"].astype(np.float32).reshape(-1, 1),
             rewards=inputs["rewards"].astype(np.float32).reshape(-1, 1),
             # n-step windows discount by gamma^k; one-step samples use the model's gamma, as SB3's do (discounts None)
