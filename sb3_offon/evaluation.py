@@ -85,7 +85,7 @@ class EpsilonGreedyEvalCallback(EvalCallback):
         model = self.model
         # A generator seeded by the seed and the step: the same evaluation whether the run was resumed or not
         seed = None if self.seed is None else [self.seed, int(model.num_timesteps)]
-        self.model = EpsilonGreedyPredictor(model, self.exploration_rate, seed=seed)  # type: ignore[arg-type]
+        self.model = EpsilonGreedyPredictor(model, self.exploration_rate, seed=seed)  # type: ignore[assignment]
         try:
             return super()._on_step()
         finally:
