@@ -30,10 +30,10 @@ class EpsilonGreedyPredictor:
 
     :param model: an algorithm with a discrete action space
     :param exploration_rate: the probability of a random action
-    :param seed: the seed of the generator that draws them
+    :param seed: the seed of the generator that draws them (a list of ints: NumPy's ``SeedSequence`` entropy)
     """
 
-    def __init__(self, model: BaseAlgorithm, exploration_rate: float, seed: int | None = None) -> None:
+    def __init__(self, model: BaseAlgorithm, exploration_rate: float, seed: int | list[int] | None = None) -> None:
         if not 0.0 <= exploration_rate <= 1.0:
             raise ValueError(f"`exploration_rate` must be in [0, 1], got {exploration_rate}")
         if not isinstance(model.action_space, spaces.Discrete):
@@ -84,7 +84,7 @@ class EpsilonGreedyEvalCallback(EvalCallback):
             return super()._on_step()
         model = self.model
         # A generator seeded by the seed and the step: the same evaluation whether the run was resumed or not
-        seed = None if self.seed is None else [self.seed, int(model.num_timesteps)]
+        seed = None if self.seed is None else [self.seed, int(self.num_timesteps)]
         self.model = EpsilonGreedyPredictor(model, self.exploration_rate, seed=seed)  # type: ignore[assignment]
         try:
             return super()._on_step()
