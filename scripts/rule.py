@@ -65,7 +65,10 @@ def study_runs(study: Study, root: Path) -> tuple[dict[str, dict[str, list[Run]]
             if kept:
                 grid, curves = evaluation_curves(kept)
                 runs.setdefault(env, {})[algo] = kept
-                scores.setdefault(env, {})[algo] = run_scores(kept, grid, curves, study.final_evaluations, threshold(env))
+                after_training = study.final == "final_evaluation"
+                scores.setdefault(env, {})[algo] = run_scores(
+                    kept, grid, curves, study.final_evaluations, threshold(env), after_training=after_training
+                )
     return runs, scores
 
 

@@ -69,6 +69,8 @@ class Run:
     settings: str = ""
     # The steps at which it resumed from a checkpoint after an interruption (its done.json's "resumed_at")
     resumed_at: tuple[int, ...] = ()
+    # The mean return of the episodes it played after training (final_evaluation.npz; None: it played none)
+    final_score: float | None = None
 
 
 def load_run(folder: Path) -> Run | None:
@@ -85,6 +87,10 @@ def load_run(folder: Path) -> Run | None:
     # One file per training env; the first line is Monitor's JSON header. Episodes of all envs in time order.
     episodes = pd.concat([pd.read_csv(path, skiprows=1) for path in monitors]).sort_values("t", kind="stable")
     spec = record["spec"]
+    final_score = None
+    if (folder / "final_evaluation.npz").is_file():
+        with np.load(folder / "final_evaluation.npz") as data:
+            final_score = float(data["results"].mean())
     return Run(
         algo=spec["algo"],
         env=spec["env"],
@@ -95,6 +101,7 @@ def load_run(folder: Path) -> Run | None:
         episodes=episodes.reset_index(drop=True),
         settings=spec.get("set", ""),
         resumed_at=tuple(record.get("resumed_at", ())),
+        final_score=final_score,
     )
 
 
@@ -200,9 +207,18 @@ def evaluation_curves(runs: list[Run]) -> tuple[np.ndarray, np.ndarray]:
     return grid, np.stack([np.interp(grid, run.timesteps, run.returns) for run in runs])
 
 
-def run_scores(runs: list[Run], grid: np.ndarray, curves: np.ndarray, last: int, solve_at: float | None) -> dict:
-    """Per-run final return, AUC, steps to threshold (budget when never reached) and whether it was reached."""
+def run_scores(
+    runs: list[Run], grid: np.ndarray, curves: np.ndarray, last: int, solve_at: float | None, after_training: bool = False
+) -> dict:
+    """
+    Per-run final return, AUC, steps to threshold (budget when never reached) and whether it was reached. The final
+    return is the mean of the last ``last`` evaluations, or with ``after_training`` the run's ``final_score`` (the
+    episodes it played after training; a run without them falls back to its last evaluations).
+    """
     final = curves[:, -last:].mean(axis=1)
+    if after_training:
+        kept = zip(runs, final, strict=True)
+        final = np.array([run.final_score if run.final_score is not None else mean for run, mean in kept])
     auc = np.trapezoid(curves, grid, axis=1) / (grid[-1] - grid[0]) if len(grid) > 1 else curves[:, 0]
     steps, solved = np.array([run.budget for run in runs], dtype=float), np.zeros(len(runs), dtype=bool)
     if solve_at is not None:

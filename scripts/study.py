@@ -89,6 +89,16 @@ def per_env_table(study: Study, runs: dict, scores: dict, measure: str) -> list[
     return lines
 
 
+def published_table(study: Study) -> list[str]:
+    """The published scores of ``study.published`` per env, one column per agent ("-" where none is given)."""
+    agents = list(study.published)
+    lines = [f"| env | {' | '.join(agents)} |", "|---|" + "---:|" * len(agents)]
+    for env in study.envs:
+        cells = [f"{study.published[agent][env]:g}" if env in study.published[agent] else "-" for agent in agents]
+        lines.append(f"| {env} | {' | '.join(cells)} |")
+    return lines
+
+
 def by_seed_table(study: Study, runs: dict, scores: dict) -> list[str]:
     """
     Each run of the candidate (a study without one: of its first algorithm), final / AUC, beside the runs of the rule's
@@ -288,7 +298,14 @@ def report(study: Study, root: Path, out: Path, interim: Interim | None = None) 
         "",
         *rule_lines(study, runs, scores, decision, lines, interim),
     ]
-    text += ["", "## Final return (mean of the last evaluations)", "", *per_env_table(study, runs, scores, "final")]
+    final_title = (
+        "Final score (mean of the episodes played after training)"
+        if study.final == "final_evaluation"
+        else "Final return (mean of the last evaluations)"
+    )
+    text += ["", f"## {final_title}", "", *per_env_table(study, runs, scores, "final")]
+    if study.published:
+        text += ["", "## Published scores (agents not run here, for context)", "", *published_table(study)]
     text += ["", "## AUC (mean evaluation return over training)", "", *per_env_table(study, runs, scores, "auc")]
     for reference in difference_references(study):
         text += ["", f"## Final return minus {study.label(reference)}'s", "", *difference_table(study, scores, reference)]

@@ -9,7 +9,9 @@ A study file names what was run (``settings``: the hyperparameter set; ``algos``
 runs' folder under the results root, default its ``name``; ``run_names``: the name a study's algorithm carries on disk
 where it differs, for runs made before a command-line name changed; ``device``; ``evaluation``: ``every`` env steps,
 ``episodes`` each, ``episodes_on`` per env), how a run is scored (``final_evaluations``: the evaluations averaged into
-the final return; the AUC is the mean evaluation return over training), the normalisation of scores
+the final return, or ``final: final_evaluation``: the episodes a run played after training, its final_evaluation.npz; the
+AUC is the mean evaluation return over training; ``published``: other agents' published scores per env, reported
+beside), the normalisation of scores
 (``normalisation``: fixed ``[low, high]`` per env, or ``minmax``: per env over every run of the study's algorithms
 there), the statistics (``confidence``, ``bootstrap_reps``), and, for a study that decides something, the ``rule``
 about its ``candidate`` (its criteria: ``scripts/rule.py``). A study that chooses among ``candidates`` gives each its
@@ -41,6 +43,11 @@ class Study:
     candidate: str | None = None
     rule: list[dict] = field(default_factory=list)
     final_evaluations: int = 3
+    # Where a run's final return comes from: "evaluations" (the mean of its last ``final_evaluations`` evaluations) or
+    # "final_evaluation" (its final_evaluation.npz: the episodes played after training, as the Atari 100k protocol scores)
+    final: str = "evaluations"
+    # Published scores per env of agents not run here, reported beside the study's: {agent: {env: score}}
+    published: dict[str, dict[str, float]] = field(default_factory=dict)
     reps_difference: int = 10_000
     reps_iqm: int = 2_000
     also_against: list[str] = field(default_factory=list)
@@ -123,6 +130,11 @@ class Study:
             candidate=data.get("candidate"),
             rule=list(data.get("rule", [])),
             final_evaluations=int(data.get("final_evaluations", 3)),
+            final=str(data.get("final", "evaluations")),
+            published={
+                agent: {env: float(score) for env, score in by_env.items()}
+                for agent, by_env in data.get("published", {}).items()
+            },
             reps_difference=int(reps.get("difference", 10_000)),
             reps_iqm=int(reps.get("iqm", 2_000)),
             also_against=list(data.get("also_against", [])),

@@ -565,3 +565,33 @@ def test_every_algorithm_of_a_study_gets_its_own_colour() -> None:
     assert colors["dqn"] == study_module.COLORS["dqn"] and colors["qrdqn_nstep"] == study_module.COLORS["qrdqn_nstep"]
     many = study_module.algo_colors([f"candidate_{index}" for index in range(10)])
     assert len(set(many.values())) == 10
+
+
+def test_a_final_score_played_after_training_is_the_final_return_when_the_study_says_so(tmp_path: Path) -> None:
+    """``final: final_evaluation``: each run's final return is the mean of its final_evaluation.npz episodes (the Atari
+    100k protocol's score), not its last evaluations; ``published`` scores are tabled beside the study's."""
+    study_module = load_script("study")
+    path, root = write_study(tmp_path, {env: [3.0, 4.0, 5.0, 6.0] for env in ENVS})
+    for env in ENVS:
+        for seed in SEEDS:
+            folder = root / "toy" / "offon_lambda_choice" / f"{env}_{seed}"
+            np.savez(folder / "final_evaluation.npz", results=np.array([0.0, 2.0 * seed]), ep_lengths=np.array([5, 5]))
+    data = {**yaml.safe_load(path.read_text()), "final": "final_evaluation", "published": {"DER": {"CartPole-v1": 7.5}}}
+    path.write_text(yaml.safe_dump(data))
+    study = study_module.Study.read(path)
+    scores = study_module.study_runs(study, root)[1]
+    # Seeds 1-4 played 0 and 2 x seed after training: means 1, 2, 3, 4; DQN has no such file: its last evaluations
+    np.testing.assert_allclose(scores["CartPole-v1"]["offon_lambda_choice"]["final"], [1.0, 2.0, 3.0, 4.0])
+    np.testing.assert_allclose(scores["CartPole-v1"]["dqn"]["final"], [1.0, 2.0, 3.0, 4.0])
+    np.testing.assert_allclose(scores["CartPole-v1"]["offon_lambda_choice"]["auc"], [3.0, 4.0, 5.0, 6.0])
+    study_module.report(study, root, tmp_path / "report")
+    table = (tmp_path / "report" / "table.md").read_text()
+    assert "## Final score (mean of the episodes played after training)" in table
+    assert "| CartPole-v1 | 7.5 |" in table and "| Acrobot-v1 | - |" in table
+    # Read without the key, the same runs are scored by their last evaluations
+    data.pop("final")
+    path.write_text(yaml.safe_dump(data))
+    study = study_module.Study.read(path)
+    np.testing.assert_allclose(
+        study_module.study_runs(study, root)[1]["CartPole-v1"]["offon_lambda_choice"]["final"], [3, 4, 5, 6]
+    )
