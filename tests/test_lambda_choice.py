@@ -8,7 +8,8 @@ from test_quantile_lambda_returns import GAMMA, fake_quantiles, fake_values, mak
 
 from sb3_offon import OffOnDQN, OffOnQRDQN
 from sb3_offon.common.lambda_choice import MEDIAN_GRID, choose_lambda
-from sb3_offon.common.lambda_returns import compute_lambda_returns, lambda_layout
+from sb3_offon.common.lambda_layout import lambda_layout
+from sb3_offon.common.lambda_returns import compute_lambda_returns
 from sb3_offon.offon_qrdqn import quantile_lambda_returns
 from sb3_offon.offon_qrdqn.quantile_lambda_returns import compute_quantile_lambda_returns
 

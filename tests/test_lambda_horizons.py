@@ -94,7 +94,7 @@ def test_drawn_horizons_match_the_trajectory_log(
         samples.added_at,
         samples.rewards,
         samples.discounts,
-        samples.next_observations,
+        np.asarray(samples.next_observations),  # StoredRows: every row at once
         samples.horizons,
         drawn,
         strict=True,

@@ -21,7 +21,8 @@ from test_lambda_returns import (
 from test_lambda_returns import assert_matches_reference as assert_matches
 
 from sb3_offon import OffOnDQN, OffOnNStepReplayBuffer
-from sb3_offon.common.lambda_returns import backward_recurrence, choose_blocks
+from sb3_offon.common.lambda_layout import choose_blocks
+from sb3_offon.common.lambda_returns import backward_recurrence
 
 LAMBDA = dict(mc_mixing="lambda", mc_initial_prob=0.9, mc_final_prob=0.9, qlearning_initial_prob=0.0, qlearning_final_prob=0.0)
 

@@ -12,7 +12,8 @@ from stable_baselines3.common.vec_env import VecNormalize
 from sb3_offon import OffOnDQN, OffOnReplayBuffer
 from sb3_offon.common import lambda_refresh
 from sb3_offon.common.buffers import discounted_returns
-from sb3_offon.common.lambda_returns import backward_recurrence, choose_blocks, compute_lambda_returns
+from sb3_offon.common.lambda_layout import choose_blocks
+from sb3_offon.common.lambda_returns import backward_recurrence, compute_lambda_returns
 from sb3_offon.offon_dqn import lambda_training
 
 OBS_SPACE = spaces.Box(-np.inf, np.inf, shape=(1,), dtype=np.float32)

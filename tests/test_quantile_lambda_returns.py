@@ -7,7 +7,7 @@ import pytest
 from gymnasium import spaces
 
 from sb3_offon import OffOnNStepReplayBuffer, OffOnReplayBuffer
-from sb3_offon.common import lambda_returns
+from sb3_offon.common import lambda_layout
 from sb3_offon.common.lambda_returns import compute_lambda_returns
 from sb3_offon.offon_qrdqn.quantile_lambda_returns import compute_quantile_lambda_returns, project_mixture
 
@@ -387,13 +387,13 @@ def test_every_sampled_target_is_one_horizon_of_the_logged_law(
     monkeypatch, buffer_size, n_envs, n_steps, n_adds, lam, qlearning_prob, cut_is_terminal, n_wanted, block_size, cut_at
 ):
     chosen = []  # the blocks of each refresh: a trace stops at its block's end
-    choose_blocks = lambda_returns.choose_blocks
+    choose_blocks = lambda_layout.choose_blocks
 
     def recording_choose_blocks(*args):
         chosen.append(choose_blocks(*args))
         return chosen[-1]
 
-    monkeypatch.setattr(lambda_returns, "choose_blocks", recording_choose_blocks)
+    monkeypatch.setattr(lambda_layout, "choose_blocks", recording_choose_blocks)
     buffer = make_buffer(buffer_size, n_envs, n_steps)
     log = logged_random_steps(buffer, n_adds, seed=n_adds, cut_at=cut_at)
     # The blocks (choose_blocks draws from NumPy's global generator): at this seed, in the cases with small blocks, some

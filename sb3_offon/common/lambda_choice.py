@@ -34,12 +34,10 @@ bootstrap action), and each transition's distributional target is then its chose
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
-if TYPE_CHECKING:  # lambda_returns imports this module
-    from sb3_offon.common.lambda_returns import LambdaLayout
+from sb3_offon.common.lambda_layout import LambdaLayout
 
 LAMBDA_CHOICES = ("fixed", "median", "autocorrelation")
 # The rules that choose one lambda for a whole refresh (the others choose one per transition)
@@ -98,12 +96,12 @@ def choose_lambda(
     return median, ChosenLambdas(values=values, mean=mean, spread=spread)
 
 
-def refresh_lambda(choice: str, layout: "LambdaLayout", next_values: np.ndarray, trace: np.ndarray, fallback: float) -> float:
+def refresh_lambda(choice: str, layout: LambdaLayout, next_values: np.ndarray, trace: np.ndarray, fallback: float) -> float:
     """
     The lambda that a per-refresh rule (:data:`PER_REFRESH_CHOICES`) chooses for a whole refresh.
 
     :param choice: the rule
-    :param layout: the refresh's transitions (:func:`sb3_offon.common.lambda_returns.lambda_layout`)
+    :param layout: the refresh's transitions (:func:`sb3_offon.common.lambda_layout.lambda_layout`)
     :param next_values: V(s_next) per transition (the atoms' mean for a distributional critic)
     :param trace: (padded) c per transition
     :param fallback: the lambda to keep where the refresh cannot measure its statistic (delta1)
@@ -114,7 +112,7 @@ def refresh_lambda(choice: str, layout: "LambdaLayout", next_values: np.ndarray,
     return fallback if correlation is None else float(np.clip(correlation, 0.0, 1.0))
 
 
-def td_error_autocorrelation(layout: "LambdaLayout", next_values: np.ndarray, trace: np.ndarray) -> float | None:
+def td_error_autocorrelation(layout: LambdaLayout, next_values: np.ndarray, trace: np.ndarray) -> float | None:
     """
     The correlation of neighbouring TD errors along the refresh's traces, pooled over its blocks.
 

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from sb3_offon.common.buffers import OffOnBufferMixin
-from sb3_offon.common.lambda_returns import no_value_after
+from sb3_offon.common.lambda_layout import no_value_after
 
 
 def lambda_for_horizon(n: float, gamma: float) -> float:
@@ -79,7 +79,8 @@ class HorizonSamples:
     :param added_at: their absolute add indices
     :param rewards: sum_(i<k) gamma^i r_(t+i) over each transition's horizon k (shortened where its episode stopped)
     :param discounts: gamma^k, multiplied by 0 where no value follows (a termination; with ``cut_is_terminal`` a cut)
-    :param next_observations: s_(t+k), normalised as ``sample()`` normalises them
+    :param next_observations: s_(t+k), normalised as ``sample()`` normalises them, as
+        :class:`sb3_offon.common.stored_rows.StoredRows` (read by chunks, or ``np.asarray`` for every row at once)
     :param horizons: k, in steps
     """
 

@@ -39,13 +39,8 @@ import numpy as np
 
 from sb3_offon.common.buffers import OffOnBufferMixin
 from sb3_offon.common.lambda_choice import PER_REFRESH_CHOICES, PER_TRANSITION_CHOICES, choose_lambda, refresh_lambda
-from sb3_offon.common.lambda_returns import (
-    LambdaLayout,
-    LambdaReturnCache,
-    backward_recurrence,
-    lambda_layout,
-    scalar_lambda_returns,
-)
+from sb3_offon.common.lambda_layout import LambdaLayout, lambda_layout
+from sb3_offon.common.lambda_returns import LambdaReturnCache, backward_recurrence, scalar_lambda_returns
 
 LAMBDA_FORMS = ("sampled", "projected")
 
