@@ -174,7 +174,9 @@ def train(monkeypatch: pytest.MonkeyPatch, folder: Path, algo: str, *extra: str)
 def test_every_atari100k_file_is_the_same_protocol(algo):
     protocol = yaml.safe_load(Path(resolve_config("dqn", "atari100k")).read_text())["atari"]
     entry = yaml.safe_load(Path(resolve_config(algo, "atari100k")).read_text())["atari"]
-    own = {"optimize_memory_usage", "replay_buffer_kwargs", "n_steps"} | {key for key in entry if key.startswith(("mc_", "q"))}
+    # policy_kwargs: the QR-DQN files name Adam (test_every_atari100k_file_builds_its_model checks the optimizer)
+    own = {"optimize_memory_usage", "replay_buffer_kwargs", "n_steps", "policy_kwargs"}
+    own |= {key for key in entry if key.startswith(("mc_", "q"))}
     own |= {"loss", "lambda_block_size", "lambda_refresh_interval"}
     assert {key: value for key, value in entry.items() if key not in own} == {
         key: value for key, value in protocol.items() if key not in own
@@ -224,3 +226,29 @@ def test_an_ale_v5_id_on_the_command_line_is_said_in_one_line(tmp_path, monkeypa
     assert len(lines) == 1 and "frameskip=1" in lines[0]
     (run,) = (tmp_path / "dqn").iterdir()
     assert (run / FINAL_EVALUATION_FILE).is_file()
+
+
+@pytest.mark.parametrize("algo", ["dqn", "dqn_nstep", "offon_dqn", "qrdqn", "qrdqn_nstep", "offon_qrdqn"])
+def test_every_atari100k_file_builds_its_model(tmp_path, algo):
+    import argparse
+
+    from rl_zoo3.utils import ALGOS
+
+    from sb3_offon.zoo import OffOnExperimentManager, register
+
+    register()
+    config = resolve_config(algo, "atari100k")
+    args = argparse.Namespace(algo=algo, env="BreakoutNoFrameskip-v4", conf_file=config)
+    manager = OffOnExperimentManager(args, algo, "BreakoutNoFrameskip-v4", str(tmp_path), eval_freq=-1, config=config)
+    model, _ = manager.setup_experiment()
+    try:
+        assert isinstance(model, ALGOS[algo])
+        network = model.policy.quantile_net if hasattr(model.policy, "quantile_net") else model.policy.q_net
+        assert isinstance(network.features_extractor, DataEfficientCNN)
+        assert isinstance(model.policy.optimizer, th.optim.Adam) and model.policy.optimizer.defaults["eps"] == 1.5e-4
+        assert model.learning_starts == 1600 and model.policy.optimizer.defaults["lr"] == 1e-4
+        assert model.replay_buffer.buffer_size == 100_000
+        assert model.optimize_memory_usage == (not algo.endswith("nstep"))
+        assert manager.eval_exploration_rate == 0.001 and manager.final_eval_episodes == 100
+    finally:
+        model.env.close()

@@ -124,8 +124,23 @@ def test_nstep_qrdqn_is_qrdqn_with_the_n_of_nstep_dqn() -> None:
 
 
 def test_offon_qrdqn_has_qrdqns_settings() -> None:
-    """offon_qrdqn.yml is qrdqn.yml entry for entry: the lambda-return settings are OffOnQRDQN's defaults."""
-    assert load(HYPERPARAMS_DIR / "offon_qrdqn.yml") == load(HYPERPARAMS_DIR / "qrdqn.yml")
+    """
+    offon_qrdqn.yml is qrdqn.yml entry for entry, plus on the MinAtar games the configuration the MinAtar horizon
+    judgement ran (its candidate's --hyperparams: lambda 0, 3-step windows); elsewhere OffOnQRDQN's defaults.
+    """
+    judgement = yaml.safe_load((Path(__file__).parents[1] / "benchmarks" / "minatar_horizon_judgement.yml").read_text())
+    candidate = judgement["candidates"][judgement["candidate"]]
+    assert candidate["algo"] == "offon_qrdqn"
+    judged = {key: yaml.safe_load(value) for key, value in (item.split(":", 1) for item in candidate["hyperparams"])}
+    assert judged == {"mc_initial_prob": 0.0, "mc_final_prob": 0.0, "n_steps": 3}
+    offon, qrdqn = load(HYPERPARAMS_DIR / "offon_qrdqn.yml"), load(HYPERPARAMS_DIR / "qrdqn.yml")
+    assert set(offon) == set(qrdqn)
+    for env_id, entry in offon.items():
+        expected = {**qrdqn[env_id], **judged} if env_id.startswith("MinAtar/") else qrdqn[env_id]
+        assert entry == expected, env_id
+    # The comment above the entries gives the judgement's figures
+    text = (HYPERPARAMS_DIR / "offon_qrdqn.yml").read_text()
+    assert "0.828 [0.774, 0.875]" in text and "+12.77" in text
 
 
 def test_nstep_entries_are_the_search_choice() -> None:
