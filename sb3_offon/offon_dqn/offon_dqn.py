@@ -6,7 +6,7 @@ import torch as th
 from stable_baselines3.common.buffers import ReplayBuffer
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
-from stable_baselines3.common.utils import LinearSchedule, obs_as_tensor
+from stable_baselines3.common.utils import obs_as_tensor
 from stable_baselines3.dqn import DQN
 from stable_baselines3.dqn.policies import DQNPolicy
 from torch.nn import functional as F
@@ -16,17 +16,10 @@ from sb3_offon.common.buffers import (
     reward_scale,
 )
 from sb3_offon.common.chunks import ChunkedMinibatchesMixin
-from sb3_offon.common.lambda_returns import LambdaReturnCache
-from sb3_offon.common.non_finite import NON_FINITE_OPTIONS, NonFiniteChecksMixin
-from sb3_offon.common.offon_model import (
-    OffOnReplayMixin,
-    check_lambda_arguments,
-    check_option,
-    check_positive_integer,
-    check_training_arguments,
-    delta1_bounds,
-)
-from sb3_offon.common.prioritized_buffers import PrioritizedBufferMixin
+from sb3_offon.common.non_finite import NonFiniteChecksMixin
+from sb3_offon.common.offon_arguments import OFFON_PARAMETERS as OFFON_PARAMETERS
+from sb3_offon.common.offon_arguments import OffOnArgumentsMixin, constructor_arguments
+from sb3_offon.common.offon_model import check_option, check_positive_integer
 from sb3_offon.offon_dqn.coin_flip_targets import CoinFlipTargetsMixin
 from sb3_offon.offon_dqn.lambda_training import LambdaTrainingMixin
 from sb3_offon.offon_dqn.policies import CnnPolicy, MlpPolicy, MultiInputPolicy, OffOnDQNPolicy
@@ -36,28 +29,10 @@ SelfOffOnDQN = TypeVar("SelfOffOnDQN", bound="OffOnDQN")
 MC_MIXING_OPTIONS = ("sample", "convex", "max", "lambda")
 SARSA_TARGET_OPTIONS = ("sampled", "expected")
 LOSS_FUNCTIONS = {"huber": F.smooth_l1_loss, "mse": F.mse_loss}
-# The constructor arguments OffOnDQN adds to DQN's
-OFFON_PARAMETERS = (
-    "mc_initial_prob",
-    "mc_final_prob",
-    "mc_fraction",
-    "qlearning_initial_prob",
-    "qlearning_final_prob",
-    "qlearning_fraction",
-    "mc_mixing",
-    "sarsa_target",
-    "mc_truncation",
-    "loss",
-    "lambda_block_size",
-    "lambda_refresh_interval",
-    "lambda_choice",
-    "lambda_horizon",
-    "double_q",
-)
 
 
 class OffOnDQN(
-    NonFiniteChecksMixin, CoinFlipTargetsMixin, LambdaTrainingMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, DQN
+    NonFiniteChecksMixin, CoinFlipTargetsMixin, LambdaTrainingMixin, ChunkedMinibatchesMixin, OffOnArgumentsMixin, DQN
 ):
     """
     Offline-Online DQN: a DQN whose regression target is drawn, per sample, among the offline Monte-Carlo return
@@ -255,8 +230,6 @@ class OffOnDQN(
         "CnnPolicy": CnnPolicy,
         "MultiInputPolicy": MultiInputPolicy,
     }
-    mc_schedule: Schedule
-    qlearning_schedule: Schedule
 
     def __init__(
         self,
@@ -303,71 +276,13 @@ class OffOnDQN(
         device: th.device | str = "auto",
         _init_setup_model: bool = True,
     ) -> None:
-        super().__init__(
-            policy,
-            env,
-            learning_rate=learning_rate,
-            buffer_size=buffer_size,
-            learning_starts=learning_starts,
-            batch_size=batch_size,
-            tau=tau,
-            gamma=gamma,
-            train_freq=train_freq,
-            gradient_steps=gradient_steps,
-            replay_buffer_class=replay_buffer_class,
-            replay_buffer_kwargs=replay_buffer_kwargs,
-            optimize_memory_usage=optimize_memory_usage,
-            n_steps=n_steps,
-            target_update_interval=target_update_interval,
-            exploration_fraction=exploration_fraction,
-            exploration_initial_eps=exploration_initial_eps,
-            exploration_final_eps=exploration_final_eps,
-            max_grad_norm=max_grad_norm,
-            stats_window_size=stats_window_size,
-            tensorboard_log=tensorboard_log,
-            policy_kwargs=policy_kwargs,
-            verbose=verbose,
-            seed=seed,
-            device=device,
-            _init_setup_model=False,
-        )
-        # Work on a copy, so that the caller's dict is left as it was
-        self.replay_buffer_kwargs = dict(self.replay_buffer_kwargs)
-        self.mc_initial_prob = mc_initial_prob
-        self.mc_final_prob = mc_final_prob
-        self.mc_fraction = mc_fraction
-        self.qlearning_initial_prob = qlearning_initial_prob
-        self.qlearning_final_prob = qlearning_final_prob
-        self.qlearning_fraction = qlearning_fraction
-        self.mc_mixing = mc_mixing
-        self.sarsa_target = sarsa_target
-        self.mc_truncation = mc_truncation
-        self.loss = loss
-        self.lambda_block_size = lambda_block_size
-        self.lambda_refresh_interval = lambda_refresh_interval
-        self.lambda_choice = lambda_choice
-        self.lambda_horizon = lambda_horizon
-        self.double_q = double_q
-        self.non_finite = non_finite
-        # The Off-On arguments are checked by _setup_model (which load() also runs); the buffer's discounting here, on
-        # the caller's arguments only
-        self._check_buffer_discounting()
-        # The target draws have a generator of their own: they never move the global RNGs that SB3 uses for
-        # exploration and sampling, and its state is saved with the model, so a resumed run draws on.
-        self.target_rng = np.random.default_rng(seed)
-        # Current delta1 and delta2, updated at each training call (like ``exploration_rate``)
-        self.mc_prob = mc_initial_prob
-        self.qlearning_prob = qlearning_initial_prob
-        if _init_setup_model:
-            self._setup_model()
+        # The Off-On arguments become attributes, the others go to DQN's constructor (OffOnArgumentsMixin)
+        super().__init__(**constructor_arguments(locals()))
 
     def _check_offon_arguments(self) -> None:
-        # Run by _setup_model rather than __init__: load()'s kwargs and custom_objects reach the model without __init__
-        check_positive_integer("buffer_size", self.buffer_size)
-        check_training_arguments(self)
-        check_lambda_arguments(self)
+        check_positive_integer("buffer_size", self.buffer_size)  # DQN leaves it unchecked (the package's QRDQN does not)
+        super()._check_offon_arguments()
         for name, options in (
-            ("non_finite", NON_FINITE_OPTIONS),
             ("mc_mixing", MC_MIXING_OPTIONS),
             ("sarsa_target", SARSA_TARGET_OPTIONS),
             ("loss", tuple(LOSS_FUNCTIONS)),
@@ -383,19 +298,6 @@ class OffOnDQN(
                 "`lambda_horizon` states the lambda of the lambda-returns: it needs `mc_mixing='lambda'`, "
                 f"got {self.mc_mixing!r}"
             )
-
-    def _setup_model(self) -> None:
-        self._check_offon_arguments()
-        self._setup_model_with_offon_buffer()
-
-        self.mc_schedule = LinearSchedule(*delta1_bounds(self), self.mc_fraction)
-        self.mc_prob = self.mc_schedule(self._current_progress_remaining)  # lambda_horizon's lambda before any training
-        self.qlearning_schedule = LinearSchedule(
-            self.qlearning_initial_prob, self.qlearning_final_prob, self.qlearning_fraction
-        )
-        self._connect_replay_buffer()
-        # Never pickled (see _excluded_save_params): a loaded model computes its lambda-returns afresh
-        self._lambda_cache: LambdaReturnCache | None = None
 
     def _connect_replay_buffer(self) -> None:
         if isinstance(self.replay_buffer, OffOnBufferMixin):
@@ -475,13 +377,7 @@ class OffOnDQN(
         where its return and next action already are, and the statistics stay on the device until one read at the end.
         Every step's update is the one the per-step loop would make: same samples, same targets, same order.
         """
-        self.mc_prob = self.mc_schedule(self._current_progress_remaining)
-        self.qlearning_prob = self.qlearning_schedule(self._current_progress_remaining)
-        self.logger.record("train/mc_prob", self.mc_prob)
-        self.logger.record("train/qlearning_prob", self.qlearning_prob)
-        if isinstance(self.replay_buffer, PrioritizedBufferMixin):
-            self.replay_buffer.anneal_beta(self._current_progress_remaining)
-            self.logger.record("train/per_beta", self.replay_buffer.beta)
+        self._update_offon_schedules()
         if not isinstance(self.replay_buffer, OffOnBufferMixin):
             super().train(gradient_steps, batch_size)
         # Each kind of target has its loop in its own mixin (coin_flip_targets.py, lambda_training.py)
@@ -512,7 +408,3 @@ class OffOnDQN(
             reset_num_timesteps=reset_num_timesteps,
             progress_bar=progress_bar,
         )
-
-    def _excluded_save_params(self) -> list[str]:
-        # The schedules are rebuilt from their parameters in _setup_model
-        return [*super()._excluded_save_params(), "mc_schedule", "qlearning_schedule", "_lambda_cache"]

@@ -6,7 +6,6 @@ from sb3_contrib.qrdqn.policies import CnnPolicy, MlpPolicy, MultiInputPolicy, Q
 from stable_baselines3.common.buffers import ReplayBuffer
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
-from stable_baselines3.common.utils import LinearSchedule
 
 from sb3_offon.common.buffers import OffOnBufferMixin
 from sb3_offon.common.chunks import ChunkedMinibatchesMixin
@@ -14,14 +13,8 @@ from sb3_offon.common.lambda_choice import PER_TRANSITION_CHOICES
 from sb3_offon.common.lambda_horizons import sample_horizon_returns
 from sb3_offon.common.lambda_refresh import LambdaRefreshMixin
 from sb3_offon.common.lambda_returns import LambdaReturnCache
-from sb3_offon.common.non_finite import NON_FINITE_OPTIONS
-from sb3_offon.common.offon_model import (
-    OffOnReplayMixin,
-    check_lambda_arguments,
-    check_option,
-    check_training_arguments,
-    delta1_bounds,
-)
+from sb3_offon.common.offon_arguments import OffOnArgumentsMixin, constructor_arguments
+from sb3_offon.common.offon_model import check_option
 from sb3_offon.common.prioritized_buffers import PrioritizedBufferMixin
 from sb3_offon.common.quantile_loss import WeightedQuantileHuberLoss, quantile_huber_loss
 from sb3_offon.offon_qrdqn.quantile_lambda_returns import LAMBDA_FORMS, compute_quantile_lambda_returns
@@ -36,7 +29,7 @@ SUPPORTED_LOSSES = ("huber",)
 PRIORITIZED_NEEDS_CACHE = "`replay_buffer_class`: prioritised replay needs the cache (`lambda_cache=True`)"
 
 
-class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, QRDQN):
+class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnArgumentsMixin, QRDQN):
     """
     Off-On QR-DQN: QR-DQN's quantile critic trained towards distributional lambda-returns from the replayed episodes,
     computed as OffOnDQN's lambda-returns are (its default ``mc_mixing="lambda"``), with the target network's quantiles
@@ -169,8 +162,10 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
         "CnnPolicy": CnnPolicy,
         "MultiInputPolicy": MultiInputPolicy,
     }
-    mc_schedule: Schedule
-    qlearning_schedule: Schedule
+    # OffOnDQN's Off-On arguments and OffOnQRDQN's own, set as attributes by OffOnArgumentsMixin
+    offon_parameters: ClassVar[tuple[str, ...]] = (*OffOnArgumentsMixin.offon_parameters, "lambda_form", "lambda_cache")
+    lambda_form: str
+    lambda_cache: bool
 
     def __init__(
         self,
@@ -219,72 +214,15 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
         device: th.device | str = "auto",
         _init_setup_model: bool = True,
     ) -> None:
-        super().__init__(
-            policy,
-            env,
-            learning_rate=learning_rate,
-            buffer_size=buffer_size,
-            learning_starts=learning_starts,
-            batch_size=batch_size,
-            tau=tau,
-            gamma=gamma,
-            train_freq=train_freq,
-            gradient_steps=gradient_steps,
-            replay_buffer_class=replay_buffer_class,
-            replay_buffer_kwargs=replay_buffer_kwargs,
-            optimize_memory_usage=optimize_memory_usage,
-            n_steps=n_steps,
-            target_update_interval=target_update_interval,
-            exploration_fraction=exploration_fraction,
-            exploration_initial_eps=exploration_initial_eps,
-            exploration_final_eps=exploration_final_eps,
-            max_grad_norm=max_grad_norm,
-            stats_window_size=stats_window_size,
-            tensorboard_log=tensorboard_log,
-            policy_kwargs=policy_kwargs,
-            verbose=verbose,
-            seed=seed,
-            device=device,
-            _init_setup_model=False,
-        )
-        # Work on a copy, so that the caller's dict is left as it was
-        self.replay_buffer_kwargs = dict(self.replay_buffer_kwargs)
-        self.mc_initial_prob = mc_initial_prob
-        self.mc_final_prob = mc_final_prob
-        self.mc_fraction = mc_fraction
-        self.qlearning_initial_prob = qlearning_initial_prob
-        self.qlearning_final_prob = qlearning_final_prob
-        self.qlearning_fraction = qlearning_fraction
-        self.mc_mixing = mc_mixing
-        self.sarsa_target = sarsa_target
-        self.mc_truncation = mc_truncation
-        self.loss = loss
-        self.lambda_block_size = lambda_block_size
-        self.lambda_refresh_interval = lambda_refresh_interval
-        self.double_q = double_q
-        self.lambda_form = lambda_form
-        self.lambda_cache = lambda_cache
-        self.lambda_choice = lambda_choice
-        self.lambda_horizon = lambda_horizon
-        self.non_finite = non_finite
-        self._check_buffer_discounting()
-        # The sampled horizons have a generator of their own (saved with the model: a resumed run draws on)
-        self.target_rng = np.random.default_rng(seed)
-        # Current lambda and delta2, updated at each training call (like ``exploration_rate``)
-        self.mc_prob = mc_initial_prob
-        self.qlearning_prob = qlearning_initial_prob
-        if _init_setup_model:
-            self._setup_model()
+        # The Off-On arguments become attributes, the others go to QRDQN's constructor (OffOnArgumentsMixin)
+        super().__init__(**constructor_arguments(locals()))
 
     def _check_offon_arguments(self) -> None:
-        # Run by _setup_model rather than __init__: load()'s kwargs and custom_objects reach the model without __init__
-        check_training_arguments(self)  # before the buffer is built from them (QRDQN's _setup_model checks them again)
-        check_lambda_arguments(self)
+        super()._check_offon_arguments()
         for name, options, what in (
             ("mc_mixing", SUPPORTED_MC_MIXING, "OffOnDQN's coin-flip modes are not supported by OffOnQRDQN"),
             ("loss", SUPPORTED_LOSSES, "OffOnQRDQN's loss is the quantile Huber loss"),
             ("lambda_form", LAMBDA_FORMS, ""),
-            ("non_finite", NON_FINITE_OPTIONS, ""),
         ):
             try:
                 check_option(name, getattr(self, name), options)
@@ -328,18 +266,6 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
         buffer_class = self.replay_buffer_class
         if isinstance(buffer_class, type) and issubclass(buffer_class, PrioritizedBufferMixin):
             raise ValueError(PRIORITIZED_NEEDS_CACHE)
-
-    def _setup_model(self) -> None:
-        self._check_offon_arguments()
-        self._setup_model_with_offon_buffer()
-        self.mc_schedule = LinearSchedule(*delta1_bounds(self), self.mc_fraction)
-        self.mc_prob = self.mc_schedule(self._current_progress_remaining)  # lambda_horizon's lambda before any training
-        self.qlearning_schedule = LinearSchedule(
-            self.qlearning_initial_prob, self.qlearning_final_prob, self.qlearning_fraction
-        )
-        self._connect_replay_buffer()
-        # Never pickled (see _excluded_save_params): a loaded model computes its lambda-returns afresh
-        self._lambda_cache: LambdaReturnCache | None = None
 
     def _connect_replay_buffer(self) -> None:
         # Also run by load_replay_buffer: a prioritised buffer loaded into a model without the cache would bring the
@@ -447,13 +373,7 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
         and uploaded in chunks, the loss read back once at the end.
         """
         assert isinstance(self.replay_buffer, OffOnBufferMixin)
-        self.mc_prob = self.mc_schedule(self._current_progress_remaining)
-        self.qlearning_prob = self.qlearning_schedule(self._current_progress_remaining)
-        self.logger.record("train/mc_prob", self.mc_prob)
-        self.logger.record("train/qlearning_prob", self.qlearning_prob)
-        if isinstance(self.replay_buffer, PrioritizedBufferMixin):
-            self.replay_buffer.anneal_beta(self._current_progress_remaining)
-            self.logger.record("train/per_beta", self.replay_buffer.beta)
+        self._update_offon_schedules()
         self._train_on_lambda_cache(gradient_steps, batch_size)
         self._check_training_loss()
 
@@ -503,7 +423,3 @@ class OffOnQRDQN(LambdaRefreshMixin, ChunkedMinibatchesMixin, OffOnReplayMixin, 
             reset_num_timesteps=reset_num_timesteps,
             progress_bar=progress_bar,
         )
-
-    def _excluded_save_params(self) -> list[str]:
-        # The schedules are rebuilt from their parameters in _setup_model
-        return [*super()._excluded_save_params(), "mc_schedule", "qlearning_schedule", "_lambda_cache"]
