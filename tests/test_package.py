@@ -44,7 +44,7 @@ def test_license_and_metadata() -> None:
     # An SPDX license expression excludes license classifiers
     assert not any(classifier.startswith("License ::") for classifier in meta.get_all("Classifier"))
     # The docs extra is part of "all", so that CI builds the documentation
-    assert 'all = ["sb3-offon[zoo,bench,tests,docs,minatar]"]' in (ROOT / "pyproject.toml").read_text()
+    assert 'all = ["sb3-offon[zoo,bench,tests,docs,minatar,atari]"]' in (ROOT / "pyproject.toml").read_text()
 
 
 def test_readme_is_short_and_opens_with_what_the_package_is() -> None:
