@@ -43,6 +43,8 @@ Usage:
     python scripts/bench_speed.py --env MinAtar/Breakout-v0 --candidate offon_qrdqn --baseline qrdqn_nstep \
         --hyperparams mc_initial_prob:0.670 mc_final_prob:0.670 --train-freq 4 --prefill 10000 --flush-denormals
 
+``--env AtariShaped100k`` (DER's network) and ``AtariShaped100kNature`` (SB3's NatureCNN) run that task with the
+Atari 100k settings (an update per env step; without ``optimize_memory_usage``, which SB3's n-step buffer refuses).
 ``--env AtariShaped`` is an Atari-shaped task made up on the spot (4 stacked 84x84 uint8 frames, episodes of 200 steps
 that end by termination, CnnPolicy, the zoo's Atari DQN settings with a smaller buffer), so that CNNs can be measured,
 on a GPU too, without Atari ROMs. On ``--device cuda`` every timed interval ends with ``torch.cuda.synchronize()``, so
@@ -71,7 +73,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.envs import FakeImageEnv
 
 import sb3_offon
-from sb3_offon import PAPER_TARGETS, MinAtarCNN, OffOnDQN, OffOnQRDQN, PrioritizedOffOnReplayBuffer
+from sb3_offon import PAPER_TARGETS, DataEfficientCNN, MinAtarCNN, OffOnDQN, OffOnQRDQN, PrioritizedOffOnReplayBuffer
 from sb3_offon.cli_args import TolerantStoreDict
 from sb3_offon.offon_dqn.offon_dqn import OFFON_PARAMETERS
 from sb3_offon.qrdqn import QRDQN
@@ -124,6 +126,27 @@ ZOO_HYPERPARAMS[ATARI_SHAPED] = dict(
     exploration_fraction=0.1,
     exploration_final_eps=0.01,
 )
+# The Atari 100k settings (sb3_offon/hyperparams/atari100k/) on the Atari-shaped task: an update per env step, DER's
+# network (AtariShaped100k) or SB3's NatureCNN (AtariShaped100kNature). Without optimize_memory_usage, which SB3's
+# n-step buffer refuses, so that both runs of a pair store their transitions alike (what it saves is memory, not time)
+ATARI_100K_SHAPED, ATARI_100K_SHAPED_NATURE = "AtariShaped100k", "AtariShaped100kNature"
+ATARI_100K_SETTINGS = dict(
+    learning_rate=1e-4,
+    batch_size=32,
+    buffer_size=100_000,
+    learning_starts=1600,
+    target_update_interval=2000,
+    train_freq=1,
+    gradient_steps=1,
+    gamma=0.99,
+    exploration_fraction=0.02,
+    exploration_final_eps=0.01,
+)
+ZOO_HYPERPARAMS[ATARI_100K_SHAPED] = dict(
+    ATARI_100K_SETTINGS,
+    policy_kwargs=dict(features_extractor_class=DataEfficientCNN, net_arch=[], optimizer_kwargs=dict(eps=1.5e-4)),
+)
+ZOO_HYPERPARAMS[ATARI_100K_SHAPED_NATURE] = dict(ATARI_100K_SETTINGS, policy_kwargs=dict(optimizer_kwargs=dict(eps=1.5e-4)))
 # The MinAtar paper's DQN settings, as in the bundled YAML files (sb3_offon/hyperparams/dqn.yml), with its network
 MINATAR_BREAKOUT = "MinAtar/Breakout-v0"
 ZOO_HYPERPARAMS[MINATAR_BREAKOUT] = dict(
@@ -175,6 +198,8 @@ BASELINES: dict[str, tuple[type[DQN], dict]] = {
 ZOO_TIMESTEPS = {"CartPole-v1": 50_000, "LunarLander-v3": 100_000, ATARI_SHAPED: 10_000_000, MINATAR_BREAKOUT: 1_000_000}
 POLICIES = {"CartPole-v1": "MlpPolicy", "LunarLander-v3": "MlpPolicy", ATARI_SHAPED: "CnnPolicy"}
 POLICIES[MINATAR_BREAKOUT] = "CnnPolicy"
+for _name in (ATARI_100K_SHAPED, ATARI_100K_SHAPED_NATURE):
+    ZOO_TIMESTEPS[_name], POLICIES[_name] = 100_000, "CnnPolicy"
 # The two runs of a pair by role: "DQN" is the baseline (whatever --baseline names), "OffOnDQN" the candidate
 ROLES = ("DQN", "OffOnDQN")
 
@@ -198,7 +223,7 @@ class AtariShapedEnv(FakeImageEnv):
 
 
 def make_env(env_id: str) -> gym.Env:
-    if env_id == ATARI_SHAPED:
+    if env_id in (ATARI_SHAPED, ATARI_100K_SHAPED, ATARI_100K_SHAPED_NATURE):
         return AtariShapedEnv()
     return gym.make(env_id)  # MinAtar's ids are registered by ``import sb3_offon``
 
