@@ -21,7 +21,6 @@ from typing import Any, SupportsFloat
 import gymnasium as gym
 from stable_baselines3.common.atari_wrappers import FireResetEnv, MaxAndSkipEnv, NoopResetEnv, WarpFrame
 
-INSTALL_HINT = 'pip install -e ".[atari]" in a clone of the source, or pip install "sb3-offon[atari]"'
 # What AtariWrapper does itself, and so what an ALE/<Game>-v5 id must not do again under it
 V5_UNDER_ATARI_WRAPPER = {"frameskip": 1, "repeat_action_probability": 0.0}
 

@@ -290,16 +290,13 @@ class OffOnExperimentManager(ExperimentManager):
         self.eval_env_wrapper = None if wrapper is None else get_wrapper_class({"env_wrapper": wrapper})
         episodes = hyperparams.pop("final_eval_episodes", None)
         self.final_eval_episodes = None if episodes is None else int(episodes)
-        results = super()._preprocess_hyperparams(hyperparams)
-        if results[1] is not None:  # an env wrapper: AtariWrapper on an Atari id
-            eval_separate = self.eval_env_kwargs is not self.env_kwargs
+        hyperparams, env_wrapper, callbacks, vec_env_wrapper = super()._preprocess_hyperparams(hyperparams)
+        if env_wrapper is not None:  # AtariWrapper, on an Atari id
             self.env_kwargs, note = ale_v5_kwargs(self.env_name.gym_id, self.env_kwargs)
-            self.eval_env_kwargs = (
-                ale_v5_kwargs(self.env_name.gym_id, self.eval_env_kwargs)[0] if eval_separate else self.env_kwargs
-            )
+            self.eval_env_kwargs = ale_v5_kwargs(self.env_name.gym_id, self.eval_env_kwargs)[0]
             if note is not None:
                 warnings.warn(note, AtariSettingsNote, stacklevel=2)
-        return results
+        return hyperparams, env_wrapper, callbacks, vec_env_wrapper
 
     def create_envs(self, n_envs: int, eval_env: bool = False, no_log: bool = False) -> VecEnv:
         """

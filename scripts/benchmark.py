@@ -333,8 +333,8 @@ def run_order(specs: list[dict]) -> list[dict]:
     than every seed of the first algorithms; within a seed, long runs first make the grid end sooner; and the runs of
     an env end close together, so that a seed half done already compares the algorithms on some envs.
     """
-    envs = list(dict.fromkeys(spec["env"] for spec in specs))
-    return sorted(specs, key=lambda spec: (spec["seed"], -spec["n_timesteps"], envs.index(spec["env"])))
+    env_order = {env: index for index, env in enumerate(dict.fromkeys(spec["env"] for spec in specs))}
+    return sorted(specs, key=lambda spec: (spec["seed"], -spec["n_timesteps"], env_order[spec["env"]]))
 
 
 # ----------------------------------------------------------------------------------------------------------------------

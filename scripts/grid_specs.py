@@ -18,8 +18,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from run_records import checkpoint_dir
 from study_file import Study
 
-from sb3_offon.atari import looks_like_atari
-
 
 def hyperparams_dir() -> Path:
     """The bundled hyperparameter folder of the installed ``sb3_offon`` (found without importing it: no torch here)."""
@@ -79,8 +77,13 @@ def build_specs(args: argparse.Namespace) -> list[dict]:
             raise SystemExit(f"No hyperparameter file {path} for --algo {algo} in the '{args.set}' set")
         entries = yaml.safe_load(path.read_text())
         for env in args.envs:
-            # An Atari game without an entry of its own reads the set's `atari` entry, as the zoo does
-            entry = entries.get(env, entries.get("atari") if looks_like_atari(env) else None)
+            entry = entries.get(env)
+            if entry is None and "atari" in entries:
+                # An Atari game without an entry of its own reads the set's `atari` entry, as the zoo does (imported
+                # here: the package brings torch, which the runner's driver needs only for such a grid)
+                from sb3_offon.atari import looks_like_atari
+
+                entry = entries["atari"] if looks_like_atari(env) else None
             if entry is None:
                 known = sorted(key for key in entries if key not in ("default", "atari"))
                 raise SystemExit(f"{path} has no entry for {env}: {known}")

@@ -50,6 +50,7 @@ def study_runs(study: Study, root: Path) -> tuple[dict[str, dict[str, list[Run]]
     loaded: dict[str, dict] = {}
     runs: dict[str, dict[str, list[Run]]] = {}
     scores: dict[str, dict[str, dict]] = {}
+    after_training = study.final == "final_evaluation"  # final return: the episodes played after training
     for env in sorted(study.envs):
         for algo in sorted(study.algos, key=algo_order) if not study.candidates else study.algos:
             if env not in study.envs_for(algo):
@@ -65,7 +66,6 @@ def study_runs(study: Study, root: Path) -> tuple[dict[str, dict[str, list[Run]]
             if kept:
                 grid, curves = evaluation_curves(kept)
                 runs.setdefault(env, {})[algo] = kept
-                after_training = study.final == "final_evaluation"
                 scores.setdefault(env, {})[algo] = run_scores(
                     kept, grid, curves, study.final_evaluations, threshold(env), after_training=after_training
                 )

@@ -60,22 +60,30 @@ def test_read_by_a_slice_only():
         rows[0]
 
 
+def filled_on_frames(algo: type, n_channels: int, n_steps: int, buffer_size: int, policy_kwargs: dict):
+    """``algo`` on 84 x 84 frames of ``n_channels``, its buffer (without copies of the next frames) filled with
+    ``n_steps`` transitions and nothing trained yet."""
+    env = FakeImageEnv(screen_height=84, screen_width=84, n_channels=n_channels, discrete=True)
+    model = algo(
+        "CnnPolicy",
+        env,
+        buffer_size=buffer_size,
+        learning_starts=10 * buffer_size,
+        optimize_memory_usage=True,
+        replay_buffer_kwargs=dict(handle_timeout_termination=False),
+        policy_kwargs=policy_kwargs,
+        seed=0,
+    )
+    model.learn(n_steps)
+    return model
+
+
 @pytest.mark.parametrize("algo", [OffOnDQN, OffOnQRDQN])
 def test_a_refresh_on_images_holds_one_chunk_of_next_observations_not_all_of_them(algo):
     # 4,000 targets of 84 x 84 frames: 28 MB of next observations if gathered at once (as before StoredRows), about
     # 2 MB a chunk (LAMBDA_FORWARD_BYTES of float32 frames: 297 rows of 7 KB) now
-    env = FakeImageEnv(screen_height=84, screen_width=84, n_channels=1, discrete=True)
-    model = algo(
-        "CnnPolicy",
-        env,
-        buffer_size=5_000,
-        learning_starts=10_000,
-        optimize_memory_usage=True,
-        replay_buffer_kwargs=dict(handle_timeout_termination=False),
-        policy_kwargs=dict(net_arch=[16]) if algo is OffOnDQN else dict(net_arch=[16], n_quantiles=5),
-        seed=0,
-    )
-    model.learn(4_500)
+    policy_kwargs = dict(net_arch=[16]) if algo is OffOnDQN else dict(net_arch=[16], n_quantiles=5)
+    model = filled_on_frames(algo, n_channels=1, n_steps=4_500, buffer_size=5_000, policy_kwargs=policy_kwargs)
     n_targets = 4_000
     gathered_at_once = n_targets * 84 * 84
     tracemalloc.start()
@@ -97,20 +105,10 @@ def resident_gb() -> float:
 @pytest.mark.skipif(not Path("/proc/self/statm").is_file(), reason="reads the resident memory from /proc (Linux)")
 def test_a_refresh_on_frames_leaves_the_process_no_larger():
     # 6,000 targets of 4 x 84 x 84 frames through DER's network: a list of each chunk's outputs, concatenated at the
-    # end, left the process about 0.45 GB larger (the C allocator's heap grown chunk after chunk); outputs written into
-    # tensors made once, a few tens of MB
-    env = FakeImageEnv(screen_height=84, screen_width=84, n_channels=4, discrete=True)
-    model = OffOnDQN(
-        "CnnPolicy",
-        env,
-        buffer_size=10_000,
-        learning_starts=10_000,
-        optimize_memory_usage=True,
-        replay_buffer_kwargs=dict(handle_timeout_termination=False),
-        policy_kwargs=dict(features_extractor_class=DataEfficientCNN, net_arch=[]),
-        seed=0,
-    )
-    model.learn(6_000)
+    # end, left the process 0.38 GB larger when measured (the C allocator's heap grown chunk after chunk); outputs
+    # written into tensors made once, a few tens of MB
+    policy_kwargs = dict(features_extractor_class=DataEfficientCNN, net_arch=[])
+    model = filled_on_frames(OffOnDQN, n_channels=4, n_steps=6_000, buffer_size=10_000, policy_kwargs=policy_kwargs)
     before = resident_gb()
     cache = model._compute_lambda_cache(64_000, key=0)
     assert len(cache.returns) == 6_000
