@@ -324,7 +324,7 @@ def code_version() -> dict[str, str]:
     return _CODE_VERSION
 
 
-def run_order(specs: list[dict]) -> list[dict]:
+def run_order(specs: list[dict], envs: list[str] | None = None) -> list[dict]:
     """
     Seed by seed, within a seed the longest runs first, and among runs of one length env by env (every algorithm of
     an env, in the grid's order, before the next env).
@@ -332,8 +332,12 @@ def run_order(specs: list[dict]) -> list[dict]:
     An interrupted grid then holds whole seeds (every algorithm and env of seeds 0..k), which compare fairly, rather
     than every seed of the first algorithms; within a seed, long runs first make the grid end sooner; and the runs of
     an env end close together, so that a seed half done already compares the algorithms on some envs.
+
+    :param specs: the runs
+    :param envs: the grid's envs in its order (default: as they first appear in ``specs``, which for the runs left of a
+        grid begun is not the grid's order: an env whose first algorithms are finished would come last)
     """
-    env_order = {env: index for index, env in enumerate(dict.fromkeys(spec["env"] for spec in specs))}
+    env_order = {env: index for index, env in enumerate(dict.fromkeys([*(envs or []), *(spec["env"] for spec in specs)]))}
     return sorted(specs, key=lambda spec: (spec["seed"], -spec["n_timesteps"], env_order[spec["env"]]))
 
 
@@ -442,7 +446,7 @@ def main(argv: list[str] | None = None) -> int:
         )
         return 2
     todo = [spec for spec in specs if statuses[id(spec)] != "finished"]
-    todo = run_order(todo)
+    todo = run_order(todo, args.envs)
     print(
         f"{len(specs)} runs ({len(args.algos)} {'candidates' if args.candidates else 'algos'} x {len(args.envs)} envs x "
         f"{len(args.seeds)} seeds "

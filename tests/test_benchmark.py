@@ -147,6 +147,16 @@ def test_run_order_is_seed_by_seed_longest_first():
     ]
 
 
+def test_the_runs_left_of_a_seed_go_in_the_grids_env_order():
+    # The first env's first algorithms are finished: its last algorithm still runs first, as the grid orders envs
+    module = load_script("benchmark")
+    left = [{"algo": "c", "env": "first", "seed": 0, "n_timesteps": 100}]
+    left += [{"algo": algo, "env": "second", "seed": 0, "n_timesteps": 100} for algo in ("a", "b", "c")]
+    left = sorted(left, key=lambda spec: spec["algo"])  # the grid's own order: algo by algo
+    order = [(spec["env"], spec["algo"]) for spec in module.run_order(left, ["first", "second"])]
+    assert order == [("first", "c"), ("second", "a"), ("second", "b"), ("second", "c")]
+
+
 def test_code_version_without_git_comes_from_the_environment(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
     # A copy of the working tree without .git (another machine's scratch copy): the commit is named by the caller
     module = load_script("benchmark")
