@@ -17,7 +17,7 @@ Output, in the zoo's layout ``{log folder}/{algo}/{env}_{run id}`` with the seed
         evaluations.npz        periodic deterministic evaluations (timesteps, results, ep_lengths)
         <env>/config.yml       the hyperparameters used; args.yml, command.txt: the zoo's record of the command
         train.log              the tail of the run's output
-        done.json              the finished marker: spec, return code, wall time, host, code version
+        done.json              the finished marker: spec, return code, wall time, host, the commit it started from
 
 Only these small files are kept: the model zips (final and best) and replay buffers stay in the run's scratch folder,
 which is deleted. A run is *finished* when ``done.json`` exists, its return code is 0 and ``evaluations.npz`` holds the
@@ -28,7 +28,8 @@ stops the runner before anything starts, unless ``--force`` redoes it.
 Interrupted runs resume: each run writes a checkpoint at every evaluation (``--checkpoint-freq``, see
 :mod:`sb3_offon.resume`) into ``<root>/.checkpoints/<grid>/<algo>/<env>_<seed>/``, and a run that finds one made with
 its settings goes on from it (``--resume``) instead of starting again; ``done.json`` then lists the steps it resumed at
-(``resumed_at``). The checkpoint is removed when the run finishes. With ``--ray-address`` (a cluster) runs write no
+(``resumed_at``) and the commit each part started from (``code_version.commits``, kept beside the checkpoints in
+``commits.json``). The checkpoint is removed when the run finishes. With ``--ray-address`` (a cluster) runs write no
 checkpoints unless ``--checkpoint-freq`` asks for them, and then on the node that ran them.
 
 The task function :func:`run_one` runs the command in a fresh temporary folder and returns the kept files as bytes;
@@ -81,6 +82,7 @@ from run_records import (
     claim,
     env_folder,
     read_evaluations,
+    record_start,
     release,
     resume_point,
     run_dir,
@@ -223,8 +225,9 @@ def run_one(spec: dict) -> dict:
     :param spec: a run of :func:`build_specs`
     :return: ``spec``, ``returncode`` (None when the command could not start or timed out), ``wall_time_s`` (of this
         part, for a resumed run), ``started``/``finished`` (UTC, ISO 8601), ``host``, ``command``, ``resumed_at`` (the
-        steps it resumed at, if any) and ``files`` (relative path -> bytes: the zoo's run folder without models and
-        replay buffers, plus ``train.log``, the tail of the output)
+        steps it resumed at, if any), ``code_version`` (the commit this part started from, and each part's) and ``files``
+        (relative path -> bytes: the zoo's run folder without models and replay buffers, plus ``train.log``, the tail of
+        the output)
     """
     if spec.get("checkpoint_dir"):
         scratch = Path(f"{spec['checkpoint_dir']}.scratch")
@@ -238,6 +241,9 @@ def run_one(spec: dict) -> dict:
         command += ["--resume", spec["checkpoint_dir"]]
     elif spec.get("checkpoint_dir"):
         start_checkpoints(Path(spec["checkpoint_dir"]), spec)
+    # The code this part of the run starts from, and with checkpoints each earlier part's (kept beside them)
+    commit = checkout_commit()
+    commits = record_start(Path(spec["checkpoint_dir"]), commit, len(resumed_at)) if spec.get("checkpoint_dir") else [commit]
     # The run's threads, already at import time (torch.set_num_threads comes later, from --num-threads)
     threads = run_threads(spec)
     environment = {**os.environ, "OMP_NUM_THREADS": threads, "MKL_NUM_THREADS": threads}
@@ -274,6 +280,7 @@ def run_one(spec: dict) -> dict:
     return {
         "spec": {key: value for key, value in spec.items() if key != "checkpoint_dir"},  # a path of this machine
         **({"resumed_at": resumed_at} if resumed_at else {}),
+        "code_version": {"commit": commit, "commits": commits},  # completed by the driver (run_code_version)
         "returncode": returncode,
         "wall_time_s": round(wall_time, 2),
         "started": started.isoformat(timespec="seconds"),
@@ -296,32 +303,49 @@ def library_versions() -> dict[str, str]:
     return versions
 
 
+def checkout_commit() -> str | None:
+    """
+    The git commit of this checkout now (with ``-dirty`` for uncommitted changes to tracked files), None without git (a
+    copy of the working tree without its git folder, another machine's scratch copy, say).
+    """
+    repository = hyperparams_dir().parent.parent
+
+    def git(*command: str) -> str:
+        return subprocess.run(["git", *command], cwd=repository, capture_output=True, text=True).stdout.strip()
+
+    try:
+        commit = git("rev-parse", "HEAD")
+        dirty = git("status", "--porcelain", "--untracked-files=no")
+    except OSError:
+        return None
+    return commit + ("-dirty" if dirty else "") if commit else None
+
+
 _CODE_VERSION: dict[str, str] = {}
 
 
 def code_version() -> dict[str, str]:
     """
-    The git commit of the code that made the results (with ``-dirty`` for uncommitted changes), once per driver.
-
-    A copy of the working tree without its git folder (another machine's scratch copy, say) has no commit to read:
-    there the environment variable ``SB3_OFFON_COMMIT`` names it, else it is ``"unknown"``.
+    The driver's commit (:func:`checkout_commit`), read once: what a run records where its task could not read the
+    commit it started from (a node without the git folder). Without git, the environment variable ``SB3_OFFON_COMMIT``
+    names it, else it is ``"unknown"``.
     """
     if not _CODE_VERSION:
-        repository = hyperparams_dir().parent.parent
-
-        def git(*command: str) -> str:
-            return subprocess.run(["git", *command], cwd=repository, capture_output=True, text=True).stdout.strip()
-
-        try:
-            commit = git("rev-parse", "HEAD")
-            dirty = git("status", "--porcelain", "--untracked-files=no")
-        except OSError:
-            commit, dirty = "", ""
-        if commit:
-            _CODE_VERSION["commit"] = commit + ("-dirty" if dirty else "")
-        else:
-            _CODE_VERSION["commit"] = os.environ.get("SB3_OFFON_COMMIT", "unknown")
+        _CODE_VERSION["commit"] = checkout_commit() or os.environ.get("SB3_OFFON_COMMIT", "unknown")
     return _CODE_VERSION
+
+
+def run_code_version(result: dict) -> dict:
+    """
+    The code a run ran: the commit its subprocess started from (read as it started, not when the driver stores it:
+    the checkout may have moved on in between), and for a resumed run ``commits``, the commit of each of its parts
+    in order (``None`` for a part that recorded none). The driver's commit where the task read none.
+    """
+    started = result.get("code_version") or {}
+    record = {"commit": started.get("commit") or code_version()["commit"]}
+    if len(started.get("commits", [])) > 1:
+        record["commits"] = started["commits"]
+    return record
 
 
 def run_order(specs: list[dict], envs: list[str] | None = None) -> list[dict]:
@@ -477,7 +501,7 @@ def main(argv: list[str] | None = None) -> int:
             if result.get("skipped"):
                 message = f"{spec['algo']} {spec['env']} seed {spec['seed']}: taken by another runner, left to it"
             else:
-                ok, message = store(result, run_dir(args.root, spec), code_version())
+                ok, message = store(result, run_dir(args.root, spec), run_code_version(result))
                 failures += not ok
                 if ok:
                     wall_times.append(result["wall_time_s"])

@@ -106,6 +106,28 @@ def start_checkpoints(folder: Path, spec: dict) -> None:
     (folder / "spec.json").write_text(json.dumps(checkpoint_settings(spec), indent=2) + "\n")
 
 
+def record_start(folder: Path, commit: str | None, earlier_parts: int) -> list[str | None]:
+    """
+    Add the commit a part of a run starts from to its checkpoint folder's ``commits.json``; return the commits of the
+    parts whose work the run goes on from, this one last.
+
+    :param folder: the run's checkpoint folder
+    :param commit: the commit this part starts from (None where none could be read)
+    :param earlier_parts: how many parts the checkpoint it resumes from holds the work of (``len(resumed_at)``: 0 for a
+        run that starts afresh); a part that left no checkpoint is dropped, one that started before the file was kept
+        is ``None``
+    """
+    path = folder / "commits.json"
+    try:
+        commits = json.loads(path.read_text())[:earlier_parts]
+    except (OSError, ValueError):
+        commits = []
+    commits = [*commits, *[None] * (earlier_parts - len(commits)), commit]
+    folder.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(commits) + "\n")
+    return commits
+
+
 def read_evaluations(folder: Path) -> dict[str, np.ndarray] | None:
     try:
         with np.load(folder / "evaluations.npz") as data:

@@ -170,6 +170,27 @@ def test_code_version_without_git_comes_from_the_environment(tmp_path: Path, mon
     assert module.code_version() == {"commit": "unknown"}
 
 
+def test_each_part_of_a_run_keeps_the_commit_it_started_from(tmp_path: Path):
+    """A run records the commit its subprocess started from, not the one the driver reads when it stores the run (the
+    checkout may have moved on during a long run); a resumed run, the commit of each part its checkpoint holds."""
+    module = load_script("benchmark")
+    folder = tmp_path / "checkpoints"
+    assert module.record_start(folder, "aaa", 0) == ["aaa"]  # a fresh start
+    assert module.record_start(folder, "bbb", 1) == ["aaa", "bbb"]  # resumed from the first part's checkpoint
+    # Resumed again from the first part's checkpoint (the second left none intact): the second part's work is not in it
+    assert module.record_start(folder, "ccc", 1) == ["aaa", "ccc"]
+    # A run whose first part started before the file was kept
+    assert module.record_start(tmp_path / "older", "ddd", 1) == [None, "ddd"]
+    assert json.loads((folder / "commits.json").read_text()) == ["aaa", "ccc"]
+    # What done.json records: the part's commit, the parts' only where there were several, the driver's as a fallback
+    assert module.run_code_version({"code_version": {"commit": "aaa", "commits": ["aaa"]}}) == {"commit": "aaa"}
+    resumed = {"code_version": {"commit": "ccc", "commits": ["aaa", "ccc"]}}
+    assert module.run_code_version(resumed) == {"commit": "ccc", "commits": ["aaa", "ccc"]}
+    module._CODE_VERSION["commit"] = "driver"
+    assert module.run_code_version({"code_version": {"commit": None, "commits": [None]}}) == {"commit": "driver"}
+    assert module.run_code_version({}) == {"commit": "driver"}  # a result from before the task read any
+
+
 @pytest.mark.slow
 def test_local_pool_writes_the_zoo_layout(local_root: Path):
     for folder in run_folders(local_root):
@@ -260,6 +281,9 @@ def test_an_interrupted_run_resumes_from_its_checkpoint(tmp_path: Path, monkeypa
     run = root / "paper" / "dqn" / f"{ENV}_0"
     done = json.loads((run / "done.json").read_text())
     assert done["resumed_at"] == [200] and "--resume" in done["command"] and "checkpoint_dir" not in done["spec"]
+    # Its first part started outside the runner, which kept no commit of it; the second's is this checkout's
+    commit = done["code_version"]["commit"]
+    assert done["code_version"]["commits"] == [None, commit] and len(commit.removesuffix("-dirty")) == 40
     np.testing.assert_array_equal(evaluations(run)["timesteps"], [100, 200, 300])
     assert not folder.exists() and not folder.with_name(f"{folder.name}.scratch").exists()
 
