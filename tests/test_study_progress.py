@@ -1,5 +1,5 @@
 """Where the README, the benchmarks page or a report says how far an unfinished study has come ("6 of 75 runs in"), the
-count is the number of the study's runs that have finished under ``results/raw`` (a ``done.json``)."""
+count is the number of the study's finished runs under ``results/raw``, as its report counts them."""
 
 import re
 from pathlib import Path
@@ -9,20 +9,9 @@ from helpers import load_script
 
 ROOT = Path(__file__).resolve().parents[1]
 study_file = load_script("study_file")
-run_records = load_script("run_records")
+load_script("study")  # puts scripts/ on the import path, which rule.py's own imports need
+rule = load_script("rule")
 STUDIES = sorted((ROOT / "benchmarks").glob("*.yml"))
-
-
-def study_progress(study, raw: Path) -> tuple[int, int]:
-    """(finished runs, runs) of a study: a run has finished when its folder holds a done.json."""
-    finished = total = 0
-    for algo in study.algos:
-        for env in study.envs_for(algo):
-            folder, run_name = study.source(algo, env)
-            for seed in study.seeds_for(algo, env):
-                total += 1
-                finished += (raw / folder / run_name / f"{run_records.env_folder(env)}_{seed}" / "done.json").is_file()
-    return finished, total
 
 
 def stated_counts(text: str, name: str, total: int, whole_file: bool) -> list[int]:
@@ -51,8 +40,12 @@ def test_an_unfinished_study_s_stated_progress_is_its_finished_runs(path: Path) 
     study = study_file.Study.read(path)
     if study.candidates:
         pytest.skip("a study that chooses among candidates: its runs are counted by scripts/selection.py")
-    finished, total = study_progress(study, ROOT / "results" / "raw")
-    if finished == total:
+    # The runs the study's report counts (scripts/study.py: "incomplete (N runs missing)")
+    runs, _ = rule.study_runs(study, ROOT / "results" / "raw")
+    missing = rule.missing_runs(study, runs)
+    total = sum(len(study.seeds_for(algo, env)) for algo in study.algos for env in study.envs_for(algo))
+    finished = total - missing
+    if not missing:
         pytest.skip(f"{study.name}: every run is in")
     report = ROOT / (study.out or f"results/{study.name}") / "README.md"
     documents = [(ROOT / "README.md", False), (ROOT / "docs" / "benchmarks.md", False), (report, True)]
