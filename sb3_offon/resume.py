@@ -50,6 +50,8 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.buffers import ReplayBuffer
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList, EvalCallback
 
+from sb3_offon.termination import TERMINATION, Terminated
+
 LATEST = "latest"
 # The complete checkpoints a run keeps: the newest, and one to fall back to if the newest turns out damaged
 KEPT_CHECKPOINTS = 2
@@ -123,23 +125,29 @@ def interrupts_held() -> Iterator[None]:
     A Ctrl-C (SIGINT) that arrives inside the block takes effect when the block ends, not inside it. A KeyboardInterrupt
     raised inside torch's zip writer leaves the writer in a state whose cleanup raises a RuntimeError, which replaces the
     KeyboardInterrupt: the run would end in a traceback, not in the interruption line. A checkpoint takes a moment to
-    write, so the interrupt waits for it. Outside the main thread (where no signal handler can be set), or where SIGINT's
-    handler was not set from Python (``signal.getsignal`` gives None, which cannot be put back), the block runs as it is.
+    write, so the interrupt waits for it. So does a SIGTERM whose handler is Python's (the command line's,
+    :mod:`sb3_offon.termination`); under the default one (the process dies) nothing is held. Outside the main thread
+    (where no signal handler can be set), or where SIGINT's handler was not set from Python (``signal.getsignal`` gives
+    None, which cannot be put back), the block runs as it is.
     """
     if threading.current_thread() is not threading.main_thread() or signal.getsignal(signal.SIGINT) is None:
         yield
         return
-    received: list[Any] = []
-    previous = signal.signal(signal.SIGINT, lambda signum, frame: received.append(frame))
+    held = [signal.SIGINT, *([signal.SIGTERM] if callable(signal.getsignal(signal.SIGTERM)) else [])]
+    received: list[tuple[int, Any]] = []
+    previous = {signum: signal.signal(signum, lambda signum, frame: received.append((signum, frame))) for signum in held}
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
-    if received:
-        if callable(previous):
-            previous(signal.SIGINT, received[0])
-        elif previous == signal.SIG_DFL:
-            signal.raise_signal(signal.SIGINT)
+        for held_signal, handler in previous.items():
+            signal.signal(held_signal, handler)
+    # Taken in the order they came; the first that raises ends the block's caller
+    for number, frame in received:
+        handler = previous[signal.Signals(number)]
+        if callable(handler):
+            handler(number, frame)
+        elif handler == signal.SIG_DFL:
+            signal.raise_signal(number)
 
 
 def resumed_seed(seed: int | None, num_timesteps: int) -> int:
@@ -468,6 +476,8 @@ class RunCheckpoint(BaseCallback):
         self.stateful = stateful_callbacks(callbacks)
         self.run_config = dict(run_config or {})
         self._next_step = 0
+        # The step of the newest checkpoint this run has (the one it resumed from, until it writes one)
+        self._saved_step = resumed_from.num_timesteps if resumed_from is not None else None
 
     def _on_training_start(self) -> None:
         self._next_step = (self.model.num_timesteps // self.every + 1) * self.every
@@ -478,9 +488,19 @@ class RunCheckpoint(BaseCallback):
         if self.model.num_timesteps >= self._next_step:
             self.save()
             self._next_step = (self.model.num_timesteps // self.every + 1) * self.every
+        if TERMINATION.pending:
+            # SIGTERM under the command line (sb3_offon.termination): this step's checkpoint, then the stop
+            if self._saved_step != self.model.num_timesteps:
+                self.save()
+            raise Terminated(f"stopped by SIGTERM at step {self.model.num_timesteps}")
 
     def _on_step(self) -> bool:
         return True
+
+    @property
+    def saved_step(self) -> int | None:
+        """The step of the newest checkpoint this run has: the one it wrote last, or the one it resumed from (None: none)."""
+        return self._saved_step
 
     def joined_monitor_texts(self) -> dict[str, str]:
         """The run's monitor files from its start, by file name (the resumed-from part first)."""
@@ -545,6 +565,7 @@ class RunCheckpoint(BaseCallback):
         for older in self.folder.iterdir():
             if older.is_dir() and older not in kept:
                 shutil.rmtree(older, ignore_errors=True)
+        self._saved_step = model.num_timesteps
         if self.verbose >= 1:
             print(f"Checkpoint of step {model.num_timesteps} written to {target}")
         return Checkpoint(folder=target, monitor_texts=monitors, **state)

@@ -16,6 +16,8 @@ the DQN family) and a ``--resume`` refused (another algorithm, env, hyperparamet
 a run on a bundled file's ``default`` entry (no settings for its env) is warned about in one line; a non-finite reward
 or loss ends the run with one line and exit status 1 (:mod:`sb3_offon.common.non_finite`); Ctrl-C ends it with one
 line, the newest checkpoint and the command that goes on from it, and exit status 130 (:func:`interruption_line`);
+SIGTERM (``kill``, a batch scheduler) stops training at the next rollout start with a checkpoint of that step, then ends
+as Ctrl-C does with status 143 (:mod:`sb3_offon.termination`);
 checkpoints to resume a run from (``--checkpoint-freq``, ``--resume``); one torch thread unless ``--num-threads`` says
 otherwise; and denormal floats flushed to zero on the CPU
 unless ``--keep-denormals`` (see :func:`flush_denormals_unless_kept`).
@@ -331,10 +333,17 @@ def resume_command(argv: list[str], folder: str | Path) -> str:
     return shlex.join([*shlex.split(prog()), *kept, "--resume", str(folder)])
 
 
+def interrupted_by_sigterm(interruption: KeyboardInterrupt) -> bool:
+    """Whether SIGTERM stopped the run (:mod:`sb3_offon.termination`), not Ctrl-C."""
+    from sb3_offon.termination import Terminated
+
+    return isinstance(interruption, Terminated) or bool(getattr(interruption, "terminated", False))
+
+
 def interruption_line(argv: list[str], interruption: KeyboardInterrupt) -> str:
     """
-    What the command line says when Ctrl-C stopped it: the step it reached, and either the newest complete checkpoint
-    on disk with the command that goes on from it, or that there is none to resume from.
+    What the command line says when Ctrl-C or SIGTERM stopped it: the step it reached, and either the newest complete
+    checkpoint on disk with the command that goes on from it, or that there is none to resume from.
 
     :param argv: the command's arguments, as typed (without the program name)
     :param interruption: the interruption; a :class:`sb3_offon.zoo_checks.RunInterrupted` (training was stopped, and the zoo
@@ -345,6 +354,7 @@ def interruption_line(argv: list[str], interruption: KeyboardInterrupt) -> str:
     from sb3_offon.resume import checkpoint_folders, checkpoint_problem
     from sb3_offon.zoo_checks import RunInterrupted, checkpoint_folder
 
+    how = "stopped (SIGTERM)" if interrupted_by_sigterm(interruption) else "interrupted (Ctrl-C)"
     if isinstance(interruption, RunInterrupted):
         folder = interruption.checkpoint_dir
         where = f"at step {interruption.num_timesteps} of {interruption.budget}"
@@ -355,14 +365,15 @@ def interruption_line(argv: list[str], interruption: KeyboardInterrupt) -> str:
         known.add_argument("--resume")
         options, _ = known.parse_known_args(argv)
         folder = options.checkpoint_dir or checkpoint_folder(options.resume)
-        # Ctrl-C in training reaches here as RunInterrupted (the zoo's manager): this one came in the setup or the saving
-        where, saved = "while the run was set up or saved", ""
+        # Ctrl-C in training reaches here as RunInterrupted (the zoo's manager): this one came in the setup, the
+        # evaluation after training or the saving
+        where, saved = "while the run was set up, evaluated after training or saved", ""
     if folder is not None:
         # The newest complete one, the one --resume takes (a checkpoint being written when Ctrl-C came is not)
         newest = next((path for path in checkpoint_folders(folder) if checkpoint_problem(path) is None), None)
         if newest is not None:
             return (
-                f"{prog()}: interrupted (Ctrl-C) {where}; newest checkpoint: step {newest.name} in {folder}; to go on "
+                f"{prog()}: {how} {where}; newest checkpoint: step {newest.name} in {folder}; to go on "
                 f"from it: {resume_command(argv, folder)}"
             )
     if not isinstance(interruption, RunInterrupted):
@@ -371,7 +382,7 @@ def interruption_line(argv: list[str], interruption: KeyboardInterrupt) -> str:
         why = f", before its first checkpoint (--checkpoint-freq {interruption.checkpoint_freq})"
     else:
         why = ", without checkpoints (--checkpoint-freq STEPS writes them)"
-    return f"{prog()}: interrupted (Ctrl-C) {where}{why}: no checkpoint to resume from{saved}"
+    return f"{prog()}: {how} {where}{why}: no checkpoint to resume from{saved}"
 
 
 @contextmanager
@@ -402,9 +413,10 @@ def main() -> int:
     """
     Register the algorithms, then run the zoo's command line on ``sys.argv``.
 
-    :return: the exit status: 0, or 130 when Ctrl-C stopped the command (after one line on stderr, see
-        :func:`interruption_line`; the zoo has saved the model trained so far when it stopped training). Errors exit
-        through ``SystemExit``
+    :return: the exit status: 0, or 130 when Ctrl-C stopped the command and 143 when SIGTERM did (after one line on
+        stderr, see :func:`interruption_line`; the zoo has saved the model trained so far when it stopped training; with
+        checkpoints, SIGTERM in training stops at the next rollout start with a checkpoint of that step,
+        :mod:`sb3_offon.termination`). Errors exit through ``SystemExit``
     """
     # Imported here, not at the top: without the zoo extra, a one-line hint instead of a traceback
     with zoo_required():
@@ -414,6 +426,7 @@ def main() -> int:
         from sb3_offon.common.non_finite import NonFiniteError
         from sb3_offon.minatar_envs import MinAtarNotInstalledError
         from sb3_offon.resume import CheckpointError
+        from sb3_offon.termination import TERMINATED, sigterm_stops_the_run
         from sb3_offon.zoo import ALGO_SUMMARIES, ALGOS, register
         from sb3_offon.zoo_checks import (
             AtariSettingsNote,
@@ -434,12 +447,12 @@ def main() -> int:
     # A MinAtar id without MinAtar: the line names the extra to install (a missing extra, as for the zoo: status 1)
     one_line = run_errors_in_one_line(usage_errors, (NonFiniteError, MinAtarNotInstalledError))
     try:
-        with one_line, argument_errors_in_one_line(), unknown_env_in_one_line():
+        with sigterm_stops_the_run(), one_line, argument_errors_in_one_line(), unknown_env_in_one_line():
             with warnings_in_one_line((DefaultHyperparametersWarning, AtariSettingsNote)):
                 zoo_train.train()
     except KeyboardInterrupt as interruption:
         print(interruption_line(typed, interruption), file=sys.stderr)
-        return INTERRUPTED
+        return TERMINATED if interrupted_by_sigterm(interruption) else INTERRUPTED
     return 0
 
 

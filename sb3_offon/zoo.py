@@ -60,6 +60,7 @@ from sb3_offon.resume import (
     joined_monitor,
     n_step_reload_unflagged,
 )
+from sb3_offon.termination import Terminated, termination_deferred
 from sb3_offon.torch_layers import DataEfficientCNN, MinAtarCNN
 from sb3_offon.tuning import SAMPLERS as SAMPLERS_BY_NAME
 from sb3_offon.variants import DQNMC, DQNSarsa
@@ -182,8 +183,9 @@ class OffOnExperimentManager(ExperimentManager):
         self.run_config: dict[str, Any] = {}
         # The warning for a run on a bundled file's `default` entry (default_settings_note), given once the setup is done
         self.default_settings: str | None = None
-        # The step at which Ctrl-C stopped training (None: it was not)
+        # The step at which Ctrl-C or SIGTERM stopped training (None: it was not), and whether it was SIGTERM
         self.interrupted_at: int | None = None
+        self.terminated = False
         # The evaluation keys of a settings file (EVALUATION_KEYS): None where it has none
         self.eval_exploration_rate: float | None = None
         self.eval_env_wrapper: Any = None
@@ -392,11 +394,15 @@ class OffOnExperimentManager(ExperimentManager):
         steps = self.n_timesteps
         if self.resumed_from is not None:
             steps, kwargs["reset_num_timesteps"] = self.n_timesteps - model.num_timesteps, False
+        # With checkpoints, SIGTERM waits for the next one (sb3_offon.termination); without, it stops the run as Ctrl-C
+        deferred = termination_deferred() if self.checkpoint_freq > 0 else contextlib.nullcontext()
         try:
-            model.learn(steps, **kwargs)
-        except KeyboardInterrupt:
+            with deferred:
+                model.learn(steps, **kwargs)
+        except KeyboardInterrupt as interruption:
             # The model trained so far is saved, as the zoo does; save_trained_model then raises RunInterrupted
             self.interrupted_at = int(model.num_timesteps)
+            self.terminated = isinstance(interruption, Terminated)
         finally:
             if self.callbacks:
                 self.callbacks[0].on_training_end()  # the zoo's: closes the progress bar
@@ -426,9 +432,20 @@ class OffOnExperimentManager(ExperimentManager):
             record = {"num_timesteps": int(model.num_timesteps), "callback": type(stopped_by[0]).__name__}
             (Path(self.save_path) / STOPPED_FILE).write_text(json.dumps(record, indent=2) + "\n")
         if self.final_eval_episodes and model.num_timesteps >= self.n_timesteps and self.interrupted_at is None:
+            self.checkpoint_trained(model)
             self.evaluate_final(model)
         if self.checkpoint_freq > 0 and (model.num_timesteps >= self.n_timesteps or stopped_by):
             shutil.rmtree(self.checkpoint_dir, ignore_errors=True)
+
+    def checkpoint_trained(self, model: BaseAlgorithm) -> None:
+        """
+        With checkpoints, one of the trained model before the evaluation after training: a run cut in that evaluation
+        (100 Atari games take up to a quarter of an hour) resumes at its budget, trains no further and plays the games,
+        instead of training again from its last checkpoint.
+        """
+        checkpoints = [callback for callback in self.callbacks if isinstance(callback, RunCheckpoint)]
+        if checkpoints and checkpoints[0].saved_step != model.num_timesteps:
+            checkpoints[0].save()
 
     def evaluate_final(self, model: BaseAlgorithm) -> None:
         """
@@ -472,6 +489,7 @@ class OffOnExperimentManager(ExperimentManager):
                 self.save_path,
                 self.checkpoint_dir if self.checkpoint_freq > 0 else None,
                 self.checkpoint_freq,
+                terminated=self.terminated,
             )
 
 

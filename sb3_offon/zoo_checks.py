@@ -59,8 +59,9 @@ class DefaultHyperparametersWarning(UserWarning):
 
 class RunInterrupted(KeyboardInterrupt):
     """
-    Ctrl-C during training, raised again once the zoo has saved the model trained so far, so that the command line can
-    say where the run stopped and how to go on, and exit with the status of an interrupted command.
+    Ctrl-C (or SIGTERM, :mod:`sb3_offon.termination`) during training, raised again once the zoo has saved the model
+    trained so far, so that the command line can say where the run stopped and how to go on, and exit with the status of
+    an interrupted command.
 
     A ``KeyboardInterrupt``, so that whatever does not know it treats it as the interruption it is.
 
@@ -69,17 +70,25 @@ class RunInterrupted(KeyboardInterrupt):
     :param save_path: the run's log folder, where the zoo saved the model
     :param checkpoint_dir: where its checkpoints go (None without ``--checkpoint-freq``)
     :param checkpoint_freq: env steps between checkpoints (0: none)
+    :param terminated: whether SIGTERM stopped it (:mod:`sb3_offon.termination`), not Ctrl-C
     """
 
     def __init__(
-        self, num_timesteps: int, budget: int, save_path: str, checkpoint_dir: str | None, checkpoint_freq: int
+        self,
+        num_timesteps: int,
+        budget: int,
+        save_path: str,
+        checkpoint_dir: str | None,
+        checkpoint_freq: int,
+        terminated: bool = False,
     ) -> None:
-        super().__init__(f"interrupted at step {num_timesteps} of {budget}")
+        super().__init__(f"{'stopped by SIGTERM' if terminated else 'interrupted'} at step {num_timesteps} of {budget}")
         self.num_timesteps = num_timesteps
         self.budget = budget
         self.save_path = save_path
         self.checkpoint_dir = checkpoint_dir
         self.checkpoint_freq = checkpoint_freq
+        self.terminated = terminated
 
 
 # The algorithm families that take only a Discrete action space (SB3 checks it only when the model is built, with an

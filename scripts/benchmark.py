@@ -37,6 +37,11 @@ the driver writes them, so a Ray cluster needs no shared file system (only ``sb3
 Locally, a pool of ``--workers`` threads (default: all cores) each waits on one training subprocess; with ``--ray``
 the same function becomes a Ray task (one CPU each), on a local Ray instance or, with ``--ray-address``, on a cluster.
 
+SIGTERM (``kill``, a batch scheduler's time limit) stops the local pool without losing training: no further run starts,
+each running run gets the signal and stops at its next rollout start with a checkpoint of that step
+(:mod:`sb3_offon.termination`), and the runner exits with status 143 once they have. A run stopped so is not recorded
+(neither ``done.json`` nor ``failed.json``): the same command resumes it from that checkpoint.
+
 Usage::
 
     # a study stated as a file (benchmarks/): its grid, resumed where it stopped; then its report
@@ -60,15 +65,18 @@ import importlib.metadata
 import os
 import platform
 import shutil
+import signal
 import socket
 import statistics
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Iterator
 from datetime import datetime, timezone
 from pathlib import Path
+from typing import IO
 
 from tqdm import tqdm
 
@@ -103,6 +111,44 @@ DEFAULT_ENVS = {
 KEEP_SUFFIXES = {".csv", ".npz", ".yml", ".yaml", ".txt", ".json"}
 KEEP_NAMES = {"vecnormalize.pkl", STOPPED_FILE}
 LOG_TAIL_LINES = 60
+# The return codes of a training process that SIGTERM stopped: 143 once the command line's handler has written its
+# checkpoint, -15 when the signal came before the handler was set (the process had just started)
+SIGTERM_RETURN_CODES = {128 + signal.SIGTERM, -signal.SIGTERM}
+
+
+class RunningProcesses:
+    """
+    The local pool's training processes now running, for SIGTERM to reach (:meth:`stop`), and whether the runner is
+    stopping. Passed to :func:`run_one` as an argument, not read as a global: Ray pickles the task function with the
+    globals it reads, and a lock cannot be pickled.
+    """
+
+    def __init__(self) -> None:
+        self.processes: set[subprocess.Popen] = set()
+        self.lock = threading.Lock()
+        self.stopping = threading.Event()
+
+    def add(self, process: subprocess.Popen) -> None:
+        with self.lock:
+            self.processes.add(process)
+        if self.stopping.is_set():  # the runner began to stop while this one started: it stops too
+            process.send_signal(signal.SIGTERM)
+
+    def discard(self, process: subprocess.Popen) -> None:
+        with self.lock:
+            self.processes.discard(process)
+
+    def stop(self, signum: int, frame: object) -> None:
+        """The runner's SIGTERM handler: no further run starts, and the running ones are asked to stop (SIGTERM each)."""
+        self.stopping.set()
+        with self.lock:
+            processes = list(self.processes)
+        for process in processes:
+            if process.poll() is None:
+                process.send_signal(signal.SIGTERM)
+
+
+LOCAL_RUNS = RunningProcesses()
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -215,7 +261,7 @@ def train_command(spec: dict, log_folder: str) -> list[str]:
 # ----------------------------------------------------------------------------------------------------------------------
 # The task function: the same for the local pool and for Ray
 # ----------------------------------------------------------------------------------------------------------------------
-def run_one(spec: dict) -> dict:
+def run_one(spec: dict, running: RunningProcesses | None = None) -> dict:
     """
     Train one run in a fresh scratch folder and return its kept files.
 
@@ -223,6 +269,7 @@ def run_one(spec: dict) -> dict:
     a run cut off leaves it where the next attempt empties it; otherwise it is a temporary folder.
 
     :param spec: a run of :func:`build_specs`
+    :param running: where the local pool lists its training processes for SIGTERM to reach (None: not listed)
     :return: ``spec``, ``returncode`` (None when the command could not start or timed out), ``wall_time_s`` (of this
         part, for a resumed run), ``started``/``finished`` (UTC, ISO 8601), ``host``, ``command``, ``resumed_at`` (the
         steps it resumed at, if any), ``code_version`` (the commit this part started from, and each part's) and ``files``
@@ -251,15 +298,7 @@ def run_one(spec: dict) -> dict:
     returncode = None
     with open(scratch / "train.log", "w") as log:
         try:
-            returncode = subprocess.run(
-                [sys.executable, *command],
-                cwd=scratch,
-                stdout=log,
-                stderr=subprocess.STDOUT,
-                env=environment,
-                timeout=spec.get("timeout"),
-                check=False,
-            ).returncode
+            returncode = run_training([sys.executable, *command], scratch, log, environment, spec.get("timeout"), running)
         except (OSError, subprocess.TimeoutExpired) as error:
             log.write(f"\n[benchmark] {type(error).__name__}: {error}\n")
     wall_time = time.perf_counter() - start
@@ -290,6 +329,40 @@ def run_one(spec: dict) -> dict:
         "command": ["python", *command],
         "files": files,
     }
+
+
+def run_training(
+    command: list[str],
+    cwd: Path,
+    log: IO[str],
+    environment: dict[str, str],
+    timeout: float | None,
+    running: RunningProcesses | None = None,
+) -> int:
+    """
+    ``subprocess.run`` of a training command (its output into ``log``, killed after ``timeout`` seconds), the process
+    listed in ``running`` while it runs so that the runner's SIGTERM reaches it.
+
+    :return: its return code
+    :raises subprocess.TimeoutExpired: after killing it, when it ran past ``timeout``
+    """
+    with subprocess.Popen(command, cwd=cwd, stdout=log, stderr=subprocess.STDOUT, env=environment) as process:
+        if running is not None:
+            running.add(process)
+        try:
+            return process.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+            raise
+        finally:
+            if running is not None:
+                running.discard(process)
+
+
+def stopped_by_sigterm(result: dict) -> bool:
+    """Whether a run's training process ended because SIGTERM stopped it (its checkpoint kept for the next attempt)."""
+    return result.get("returncode") in SIGTERM_RETURN_CODES
 
 
 def library_versions() -> dict[str, str]:
@@ -385,11 +458,13 @@ def run_local(specs: list[dict], workers: int, root: Path) -> Iterator[dict]:
 
         def start_next() -> Iterator[dict]:
             for spec in waiting:
+                if LOCAL_RUNS.stopping.is_set():  # SIGTERM: what has not started stays for the next runner
+                    return
                 descriptor = take(root, spec)
                 if descriptor is None:
                     yield {"spec": spec, "skipped": True}
                     continue
-                running[pool.submit(run_one, spec)] = descriptor
+                running[pool.submit(run_one, spec, LOCAL_RUNS)] = descriptor
                 return
 
         try:
@@ -491,6 +566,7 @@ def main(argv: list[str] | None = None) -> int:
         results = run_ray(todo, args.workers, args.ray_address, args.root)
     else:
         results = run_local(todo, args.workers, args.root)
+        signal.signal(signal.SIGTERM, LOCAL_RUNS.stop)
     # The bar counts env steps (budgets), so that its ETA weighs long runs as such; the postfix counts runs
     bar = tqdm(total=sum(spec["n_timesteps"] for spec in todo), unit="step", unit_scale=True, dynamic_ncols=True)
     bar.set_postfix_str(f"0/{len(todo)} runs")
@@ -500,6 +576,12 @@ def main(argv: list[str] | None = None) -> int:
             spec = result["spec"]
             if result.get("skipped"):
                 message = f"{spec['algo']} {spec['env']} seed {spec['seed']}: taken by another runner, left to it"
+            elif stopped_by_sigterm(result):
+                name = f"{spec['algo']} {spec['env']} seed {spec['seed']}"
+                message = (
+                    f"stopped {name} by SIGTERM after {result['wall_time_s']:.1f} s; its checkpoint is kept, and the "
+                    "same command resumes it"
+                )
             else:
                 ok, message = store(result, run_dir(args.root, spec), run_code_version(result))
                 failures += not ok
@@ -515,6 +597,9 @@ def main(argv: list[str] | None = None) -> int:
         )
     if failures:
         print(f"{failures} run(s) failed; run the same command again to redo them", file=sys.stderr)
+    if LOCAL_RUNS.stopping.is_set():
+        print("Stopped by SIGTERM; the same command goes on from the runs' checkpoints", file=sys.stderr)
+        return 128 + signal.SIGTERM
     return 1 if failures else 0
 
 

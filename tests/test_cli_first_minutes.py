@@ -314,7 +314,8 @@ def test_ctrl_c_before_training(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
     monkeypatch.setattr(OffOnExperimentManager, "create_callbacks", interrupted)
     assert run(monkeypatch, "--algo", "dqn", "--env", "CartPole-v1", "-f", str(tmp_path), "--checkpoint-freq", "100") == 130
     assert capsys.readouterr().err.strip().splitlines()[-1] == (
-        f"{PROG}: interrupted (Ctrl-C) while the run was set up or saved: no checkpoint to resume from"
+        f"{PROG}: interrupted (Ctrl-C) while the run was set up, evaluated after training or saved: no checkpoint to "
+        "resume from"
     )
 
 
@@ -329,7 +330,8 @@ def test_interruption_line_outside_training_finds_the_resumed_checkpoints(tmp_pa
     size = (folder / "300" / "model.zip").stat().st_size
     (folder / "300" / "checkpoint.json").write_text(json.dumps({"file_sizes": {"model.zip": size}}))
     assert interruption_line(argv, KeyboardInterrupt()) == (
-        f"{PROG}: interrupted (Ctrl-C) while the run was set up or saved; newest checkpoint: step 300 in {folder}; to go "
+        f"{PROG}: interrupted (Ctrl-C) while the run was set up, evaluated after training or saved; newest checkpoint: "
+        f"step 300 in {folder}; to go "
         f"on from it: {PROG} --algo dqn --resume {folder}"
     )
 
