@@ -478,6 +478,7 @@ class RunCheckpoint(BaseCallback):
         self._next_step = 0
         # The step of the newest checkpoint this run has (the one it resumed from, until it writes one)
         self._saved_step = resumed_from.num_timesteps if resumed_from is not None else None
+        self._stopped = False
 
     def _on_training_start(self) -> None:
         self._next_step = (self.model.num_timesteps // self.every + 1) * self.every
@@ -488,8 +489,17 @@ class RunCheckpoint(BaseCallback):
         if self.model.num_timesteps >= self._next_step:
             self.save()
             self._next_step = (self.model.num_timesteps // self.every + 1) * self.every
-        if TERMINATION.pending:
-            # SIGTERM under the command line (sb3_offon.termination): this step's checkpoint, then the stop
+        self._stop_if_terminated()
+
+    def _on_training_end(self) -> None:
+        # A SIGTERM in the last rollout: no rollout start follows, the stop comes here
+        self._stop_if_terminated()
+
+    def _stop_if_terminated(self) -> None:
+        """Under SIGTERM (the command line's, :mod:`sb3_offon.termination`): this step's checkpoint, then the stop."""
+        # Once: the zoo calls its first callback's on_training_end again after the stop
+        if TERMINATION.pending and not self._stopped:
+            self._stopped = True
             if self._saved_step != self.model.num_timesteps:
                 self.save()
             raise Terminated(f"stopped by SIGTERM at step {self.model.num_timesteps}")

@@ -419,8 +419,9 @@ class OffOnExperimentManager(ExperimentManager):
         budget removes its checkpoints: they are for runs that did not. So does a run that a callback of its own ended
         on purpose (one whose ``stopped_at`` is set, :class:`sb3_offon.callbacks.StopOnMeanTrainingReward`): it is
         finished, and says so in ``stopped.json`` in its log folder (the step and the callback), which tells it from a
-        run cut short by Ctrl-C. A run cut short keeps its checkpoints; the zoo saves its model, then
-        :meth:`save_trained_model` raises :class:`RunInterrupted`.
+        run cut short by Ctrl-C. A run cut short (Ctrl-C or SIGTERM, in its last rollout too) keeps its checkpoints; the zoo
+        saves its model, then :meth:`save_trained_model` raises :class:`RunInterrupted`. With ``final_eval_episodes``, the
+        trained model is checkpointed before its games (:meth:`checkpoint_trained`).
         """
         self._learn_to_budget(model)
         if self.resumed_from is not None:
@@ -434,7 +435,9 @@ class OffOnExperimentManager(ExperimentManager):
         if self.final_eval_episodes and model.num_timesteps >= self.n_timesteps and self.interrupted_at is None:
             self.checkpoint_trained(model)
             self.evaluate_final(model)
-        if self.checkpoint_freq > 0 and (model.num_timesteps >= self.n_timesteps or stopped_by):
+        # Stopped at its budget by Ctrl-C or SIGTERM (in its last rollout), a run is not finished: it has its games to play
+        finished = model.num_timesteps >= self.n_timesteps or stopped_by
+        if self.checkpoint_freq > 0 and finished and self.interrupted_at is None:
             shutil.rmtree(self.checkpoint_dir, ignore_errors=True)
 
     def checkpoint_trained(self, model: BaseAlgorithm) -> None:

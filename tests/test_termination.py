@@ -138,6 +138,27 @@ def test_a_run_cut_in_its_evaluation_after_training_resumes_at_its_budget(
     assert not (tmp_path / "ckpt").exists()  # finished: its checkpoints removed
 
 
+def test_a_sigterm_in_the_last_rollout_stops_with_a_checkpoint_of_the_budget(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys
+) -> None:
+    # In the training call of step 400 of 400: no rollout start follows, training ends, and the run stops there
+    monkeypatch.chdir(tmp_path)
+    played: list[int] = []
+    final_evaluation = sb3_offon.zoo.final_evaluation
+    monkeypatch.setattr(
+        sb3_offon.zoo, "final_evaluation", lambda model, *a, **k: played.append(0) or final_evaluation(model, *a, **k)
+    )
+    command = [*RUN, "--checkpoint-freq", "300", "--checkpoint-dir", "ckpt", *SHORT, "final_eval_episodes:2"]
+    with monkeypatch.context() as patch:
+        sigterm_in_training_at(patch, 400)
+        assert run(patch, *command) == TERMINATED
+    line = last_line(capsys)
+    assert line.startswith(f"{PROG}: stopped (SIGTERM) at step 400 of 400; newest checkpoint: step 400 in ckpt; to go on")
+    assert played == []  # stopped before the games
+    assert run(monkeypatch, *go_on(line)) == 0 and played == [0]
+    assert not (tmp_path / "ckpt").exists()
+
+
 def test_a_sigterm_while_a_checkpoint_is_written_takes_effect_once_it_is_written(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
