@@ -340,7 +340,16 @@ def test_interruption_line_outside_training_finds_the_resumed_checkpoints(tmp_pa
 def test_a_real_sigint_exits_130_with_the_line(tmp_path: Path) -> None:
     command = [sys.executable, "-m", "sb3_offon.train", "--algo", "dqn", "--env", "CartPole-v1", "-n", "1000000"]
     command += ["-f", "logs", "--checkpoint-freq", "500", "--checkpoint-dir", "ckpt", *SHORT]
-    process = subprocess.Popen(command, cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    # SIGINT at its default in the child, as from a terminal: under a shell without job control (``nohup ... &``) this
+    # process may have inherited it ignored, and the child would then ignore Ctrl-C
+    process = subprocess.Popen(
+        command,
+        cwd=tmp_path,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
     deadline = time.monotonic() + 300
     while not (tmp_path / "ckpt" / "latest").is_file() and process.poll() is None and time.monotonic() < deadline:
         time.sleep(0.2)

@@ -8,6 +8,7 @@ import re
 import signal
 import sys
 import warnings
+from collections.abc import Iterator
 from pathlib import Path
 
 import gymnasium as gym
@@ -400,6 +401,18 @@ def test_the_python_way_resumes_as_the_command_line_does(tmp_path: Path, monkeyp
         assert getattr(resumed, attribute) == getattr(whole, attribute), attribute
 
 
+@pytest.fixture
+def python_sigint_handler() -> Iterator[None]:
+    """
+    Python's own SIGINT handler for the test, as in a terminal: a process started in the background by a shell without
+    job control (``nohup ... &``) inherits SIGINT ignored, and an ignored SIGINT rightly interrupts nothing.
+    """
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)
+
+
+@pytest.mark.usefixtures("python_sigint_handler")
 def test_a_ctrl_c_while_a_checkpoint_is_written_takes_effect_once_it_is_written(tmp_path: Path, monkeypatch) -> None:
     """A SIGINT raised inside torch's zip writer would end the run in a RuntimeError from the writer's cleanup; held
     until the checkpoint is written, it ends the run as a KeyboardInterrupt with a complete checkpoint behind it."""
