@@ -7,7 +7,8 @@ that writes a checkpoint every 20,000 steps loses up to 20,000 steps of training
 
 - in training, with ``--checkpoint-freq``: the signal is noted, the run goes on to the next rollout start (the point
   where :class:`sb3_offon.resume.RunCheckpoint` writes its checkpoints, between one rollout's gradient steps and the
-  next rollout; an evaluation under way finishes first), writes a checkpoint of that step there, and stops. The zoo
+  next rollout; an evaluation under way finishes first), writes a checkpoint of that step there, and stops (in the
+  last rollout, where no rollout start follows: at the end of training, with a checkpoint of the budget). The zoo
   saves the model trained so far, the command says which checkpoint to go on from, and exits with status 143
   (128 + 15, the shell's status of a process ended by SIGTERM);
 - elsewhere (the run's set-up, a run without checkpoints, the evaluation after training, the saving): the run stops
@@ -16,6 +17,10 @@ that writes a checkpoint every 20,000 steps loses up to 20,000 steps of training
 Between the signal and the stop there is the rest of a rollout, an evaluation under way and the checkpoint's writing
 (seconds for a vector task; for an Atari 100k run, its 100,000-transition replay buffer): a scheduler's grace period
 must cover them (Slurm: ``--signal=TERM@120`` or a longer ``KillWait``).
+
+A run that plays games after training (``final_eval_episodes``, the Atari 100k settings) checkpoints its trained model
+before them (``OffOnExperimentManager.checkpoint_trained`` in :mod:`sb3_offon.zoo`): cut during the games, it resumes at its
+budget, trains no further and plays them.
 
 Outside the command line (a ``model.learn`` in a script) nothing changes: no handler is set.
 """
