@@ -10,6 +10,7 @@ import torch as th
 from stable_baselines3.common.base_class import BaseAlgorithm
 
 from sb3_offon.resume import Checkpoint, RunCheckpoint
+from sb3_offon.train import main as train_main
 
 SCRIPTS = Path(__file__).resolve().parents[1] / "scripts"
 
@@ -50,3 +51,13 @@ def interrupt_after_checkpoint(monkeypatch: pytest.MonkeyPatch, step: int) -> No
         return checkpoint
 
     monkeypatch.setattr(RunCheckpoint, "save", save_then_interrupt)
+
+
+def run_train(monkeypatch: pytest.MonkeyPatch, *arguments: str) -> int | str | None:
+    """``python -m sb3_offon.train``'s ``main()`` on ``arguments``, in this process: its return value, or the status of
+    the ``SystemExit`` it ends with."""
+    monkeypatch.setattr(sys, "argv", ["sb3_offon.train", *arguments])
+    try:
+        return train_main()
+    except SystemExit as exit_:
+        return exit_.code

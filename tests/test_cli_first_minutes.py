@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 from gymnasium import spaces
-from helpers import hide_minatar, interrupt_after_checkpoint
+from helpers import hide_minatar, interrupt_after_checkpoint, run_train
 from rl_zoo3.exp_manager import ExperimentManager
 from stable_baselines3 import DQN, PPO
 
@@ -25,7 +25,7 @@ from sb3_offon import OffOnDQN, OffOnQRDQN
 from sb3_offon.enjoy import main as enjoy_main
 from sb3_offon.enjoy import no_model_in_one_line
 from sb3_offon.resume import Checkpoint
-from sb3_offon.train import INTERRUPTED, interruption_line, main, resume_command
+from sb3_offon.train import INTERRUPTED, interruption_line, resume_command
 from sb3_offon.zoo import ALGOS, OffOnExperimentManager
 from sb3_offon.zoo_checks import (
     HYPERPARAMS_DIR,
@@ -43,15 +43,6 @@ MINATAR_MISSING = (
     "The MinAtar games need the optional 'minatar' dependencies (module 'minatar' is missing): "
     'pip install -e ".[minatar]" in a clone of the source, or pip install "sb3-offon[minatar]"'
 )
-
-
-def run(monkeypatch: pytest.MonkeyPatch, *arguments: str) -> int | str | None:
-    """``main()`` on ``arguments``: its return value, or the status of the ``SystemExit`` it ends with."""
-    monkeypatch.setattr(sys, "argv", ["sb3_offon.train", *arguments])
-    try:
-        return main()
-    except SystemExit as exit_:
-        return exit_.code
 
 
 def run_enjoy(monkeypatch: pytest.MonkeyPatch, *arguments: str) -> int | str | None:
@@ -80,23 +71,23 @@ def error_line(capsys: pytest.CaptureFixture) -> str:
 
 
 def test_an_unknown_algo_is_one_line_with_close_matches(monkeypatch: pytest.MonkeyPatch, capsys) -> None:
-    assert run(monkeypatch, "--algo", "offon_qrdn", "--env", "CartPole-v1") == 2
+    assert run_train(monkeypatch, "--algo", "offon_qrdn", "--env", "CartPole-v1") == 2
     assert error_line(capsys) == (
         f"{PROG}: error: unknown --algo 'offon_qrdn'; close matches: offon_qrdqn, offon_dqn, offon_paper "
         "(--help lists them all)"
     )
-    assert run(monkeypatch, "--algo=zzz") == 2
+    assert run_train(monkeypatch, "--algo=zzz") == 2
     assert error_line(capsys) == f"{PROG}: error: unknown --algo 'zzz'; no name is close to it (--help lists them all)"
 
 
 @pytest.mark.parametrize("typed, name", [("OffOnDQN", "offon_dqn"), ("OffOnQRDQN", "offon_qrdqn"), ("QRDQN", "qrdqn")])
 def test_a_class_name_for_algo_points_to_its_name(typed: str, name: str, monkeypatch: pytest.MonkeyPatch, capsys) -> None:
-    assert run(monkeypatch, "--algo", typed, "--env", "CartPole-v1") == 2
+    assert run_train(monkeypatch, "--algo", typed, "--env", "CartPole-v1") == 2
     assert error_line(capsys).startswith(f"{PROG}: error: unknown --algo '{typed}'; close matches: {name}")
 
 
 def test_help_still_lists_the_algorithms(monkeypatch: pytest.MonkeyPatch, capsys) -> None:
-    assert run(monkeypatch, "--help") == 0
+    assert run_train(monkeypatch, "--help") == 0
     out = capsys.readouterr().out
     head, _, usage = out.partition("usage: ")
     # The opening paragraph names each, the --algo choices hold each
@@ -113,7 +104,7 @@ def test_a_minatar_game_without_minatar_is_one_line(tmp_path: Path, monkeypatch:
     # uninstalled package's does
     hide_minatar(monkeypatch)
     no_training(monkeypatch)
-    assert run(monkeypatch, "--algo", "qrdqn_nstep", "--env", "MinAtar/Breakout-v0", "-f", str(tmp_path)) == 1
+    assert run_train(monkeypatch, "--algo", "qrdqn_nstep", "--env", "MinAtar/Breakout-v0", "-f", str(tmp_path)) == 1
     assert error_line(capsys) == f"{PROG}: error: {MINATAR_MISSING}"
 
 
@@ -162,7 +153,7 @@ def test_continuous_actions_are_refused_in_one_line(
     algo: str, algo_class: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys
 ) -> None:
     no_training(monkeypatch)
-    assert run(monkeypatch, "--algo", algo, "--env", "Pendulum-v1", "-f", str(tmp_path)) == 2
+    assert run_train(monkeypatch, "--algo", algo, "--env", "Pendulum-v1", "-f", str(tmp_path)) == 2
     assert error_line(capsys) == (
         f"{PROG}: error: Pendulum-v1 has the action space Box(-2.0, 2.0, (1,), float32) (continuous): --algo {algo} "
         f"({algo_class}) needs a Discrete action space (a finite set of actions); the zoo's ppo, sac and td3 take "
@@ -188,7 +179,7 @@ def test_minatar_and_the_paper_tasks_pass_the_check(
     algo: str, env: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys
 ) -> None:
     models = no_training(monkeypatch)
-    assert run(monkeypatch, "--algo", algo, "--env", env, "-f", str(tmp_path), *SHORT, "buffer_size:1000") == 0
+    assert run_train(monkeypatch, "--algo", algo, "--env", env, "-f", str(tmp_path), *SHORT, "buffer_size:1000") == 0
     (model,) = models
     assert isinstance(model.action_space, spaces.Discrete)
     assert "error" not in capsys.readouterr().err
@@ -199,16 +190,16 @@ def test_minatar_and_the_paper_tasks_pass_the_check(
 
 def test_an_env_without_settings_is_warned_about_in_one_line(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys) -> None:
     no_training(monkeypatch)
-    assert run(monkeypatch, "--algo", "offon_dqn", "--env", "CartPole-v0", "-f", str(tmp_path), "--eval-freq", "-1") == 0
+    assert run_train(monkeypatch, "--algo", "offon_dqn", "--env", "CartPole-v0", "-f", str(tmp_path), "--eval-freq", "-1") == 0
     assert error_line(capsys) == (
         f"{PROG}: warning: sb3_offon/hyperparams/offon_dqn.yml has no settings for CartPole-v0: training with its "
         "'default' entry (untuned) for 1,000,000 steps (closest entries: CartPole-v1). Choose the budget with -n, the "
         "settings with --hyperparams key:value or -conf FILE"
     )
     # -n is the budget it names; an env with settings is not warned about
-    assert run(monkeypatch, "--algo", "offon_dqn", "--env", "CartPole-v0", "-n", "5000", "-f", str(tmp_path)) == 0
+    assert run_train(monkeypatch, "--algo", "offon_dqn", "--env", "CartPole-v0", "-n", "5000", "-f", str(tmp_path)) == 0
     assert "'default' entry (untuned) for 5,000 steps" in error_line(capsys)
-    assert run(monkeypatch, "--algo", "offon_dqn", "--env", "CartPole-v1", "-f", str(tmp_path), "--eval-freq", "-1") == 0
+    assert run_train(monkeypatch, "--algo", "offon_dqn", "--env", "CartPole-v1", "-f", str(tmp_path), "--eval-freq", "-1") == 0
     assert capsys.readouterr().err == ""
 
 
@@ -246,7 +237,7 @@ def test_ctrl_c_with_checkpoints_says_how_to_go_on(tmp_path: Path, monkeypatch: 
     command += ["--checkpoint-dir", "ckpt", *SHORT]
     with monkeypatch.context() as patch:
         interrupt_after_checkpoint(patch, 200)
-        assert run(patch, *command) == INTERRUPTED
+        assert run_train(patch, *command) == INTERRUPTED
     checkpoint = Checkpoint.latest("ckpt")
     assert checkpoint is not None and checkpoint.num_timesteps == 200
     line = capsys.readouterr().err.strip().splitlines()[-1]
@@ -260,7 +251,7 @@ def test_ctrl_c_with_checkpoints_says_how_to_go_on(tmp_path: Path, monkeypatch: 
     # The command it gives goes on to the budget
     resumed = shlex.split(line.partition("to go on from it: ")[2])
     assert resumed[:3] == shlex.split(PROG)
-    assert run(monkeypatch, *resumed[3:]) == 0
+    assert run_train(monkeypatch, *resumed[3:]) == 0
     assert OffOnDQN.load(tmp_path / "logs" / "offon_dqn" / "CartPole-v1_2" / "CartPole-v1.zip").num_timesteps == 400
 
 
@@ -276,7 +267,7 @@ def interrupt_training(monkeypatch: pytest.MonkeyPatch) -> None:
 def test_ctrl_c_without_checkpoints_exits_130(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys) -> None:
     monkeypatch.chdir(tmp_path)
     interrupt_training(monkeypatch)
-    assert run(monkeypatch, "--algo", "offon_dqn", "--env", "CartPole-v1", "-n", "400", "-f", "logs", *SHORT) == 130
+    assert run_train(monkeypatch, "--algo", "offon_dqn", "--env", "CartPole-v1", "-n", "400", "-f", "logs", *SHORT) == 130
     line = capsys.readouterr().err.strip().splitlines()[-1]
     assert line == (
         f"{PROG}: interrupted (Ctrl-C) at step 150 of 400, without checkpoints (--checkpoint-freq STEPS writes them): "
@@ -285,7 +276,7 @@ def test_ctrl_c_without_checkpoints_exits_130(tmp_path: Path, monkeypatch: pytes
     assert (tmp_path / "logs" / "offon_dqn" / "CartPole-v1_1" / "CartPole-v1.zip").is_file()
     # With --checkpoint-freq, before the first one
     assert (
-        run(
+        run_train(
             monkeypatch,
             "--algo",
             "offon_dqn",
@@ -312,7 +303,9 @@ def test_ctrl_c_before_training(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
         raise KeyboardInterrupt
 
     monkeypatch.setattr(OffOnExperimentManager, "create_callbacks", interrupted)
-    assert run(monkeypatch, "--algo", "dqn", "--env", "CartPole-v1", "-f", str(tmp_path), "--checkpoint-freq", "100") == 130
+    assert (
+        run_train(monkeypatch, "--algo", "dqn", "--env", "CartPole-v1", "-f", str(tmp_path), "--checkpoint-freq", "100") == 130
+    )
     assert capsys.readouterr().err.strip().splitlines()[-1] == (
         f"{PROG}: interrupted (Ctrl-C) while the run was set up, evaluated after training or saved: no checkpoint to "
         "resume from"

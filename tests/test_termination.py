@@ -16,28 +16,18 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import SCRIPTS
+from helpers import SCRIPTS, run_train
 from stable_baselines3.common.monitor import load_results
 
 import sb3_offon.zoo
 from sb3_offon import OffOnDQN
 from sb3_offon.resume import Checkpoint, RunCheckpoint, checkpoint_problem
 from sb3_offon.termination import TERMINATED, TERMINATION, Terminated, sigterm_stops_the_run, termination_deferred
-from sb3_offon.train import main
 
 PROG = "python -m sb3_offon.train"
 # Learning from step 100, a training call of 2 gradient steps every 50 env steps: rollout starts at every multiple of 50
 SHORT = ["--eval-freq", "-1", "--seed", "0", "--hyperparams", "learning_starts:100", "train_freq:50", "gradient_steps:2"]
 RUN = ["--algo", "offon_dqn", "--env", "CartPole-v1", "-n", "400", "-f", "logs"]
-
-
-def run(monkeypatch: pytest.MonkeyPatch, *arguments: str) -> int | str | None:
-    """``main()`` on ``arguments``: its return value, or the status of the ``SystemExit`` it ends with."""
-    monkeypatch.setattr(sys, "argv", ["sb3_offon.train", *arguments])
-    try:
-        return main()
-    except SystemExit as exit_:
-        return exit_.code
 
 
 def sigterm_in_training_at(monkeypatch: pytest.MonkeyPatch, step: int) -> None:
@@ -74,7 +64,7 @@ def test_sigterm_in_training_stops_at_the_next_rollout_with_a_checkpoint_of_that
     with monkeypatch.context() as patch:
         # In the training call of step 250, after the checkpoint of step 200: the run finishes the call, then stops
         sigterm_in_training_at(patch, 250)
-        assert run(patch, *command) == TERMINATED == 143
+        assert run_train(patch, *command) == TERMINATED == 143
     line = last_line(capsys)
     assert line.startswith(f"{PROG}: stopped (SIGTERM) at step 250 of 400; newest checkpoint: step 250 in ckpt; to go on")
     checkpoint = Checkpoint.latest("ckpt")
@@ -85,14 +75,14 @@ def test_sigterm_in_training_stops_at_the_next_rollout_with_a_checkpoint_of_that
     assert signal.getsignal(signal.SIGTERM) is handler and not TERMINATION.installed
     # The zoo saved the model trained so far, and the command given goes on to the budget
     assert OffOnDQN.load(tmp_path / "logs" / "offon_dqn" / "CartPole-v1_1" / "CartPole-v1.zip").num_timesteps == 250
-    assert run(monkeypatch, *go_on(line)) == 0
+    assert run_train(monkeypatch, *go_on(line)) == 0
     assert OffOnDQN.load(tmp_path / "logs" / "offon_dqn" / "CartPole-v1_2" / "CartPole-v1.zip").num_timesteps == 400
 
 
 def test_sigterm_without_checkpoints_stops_where_it_lands(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys) -> None:
     monkeypatch.chdir(tmp_path)
     sigterm_in_training_at(monkeypatch, 250)
-    assert run(monkeypatch, *RUN, *SHORT) == TERMINATED
+    assert run_train(monkeypatch, *RUN, *SHORT) == TERMINATED
     assert last_line(capsys) == (
         f"{PROG}: stopped (SIGTERM) at step 250 of 400, without checkpoints (--checkpoint-freq STEPS writes them): no "
         "checkpoint to resume from; the model trained so far is saved in logs/offon_dqn/CartPole-v1_1"
@@ -117,7 +107,7 @@ def test_a_run_cut_in_its_evaluation_after_training_resumes_at_its_budget(
 
     monkeypatch.setattr(sb3_offon.zoo, "final_evaluation", final_evaluation_cut)
     command = [*RUN, "--checkpoint-freq", "300", "--checkpoint-dir", "ckpt", *SHORT, "final_eval_episodes:3"]
-    assert run(monkeypatch, *command) == TERMINATED
+    assert run_train(monkeypatch, *command) == TERMINATED
     line = last_line(capsys)
     assert line.startswith(
         f"{PROG}: stopped (SIGTERM) while the run was set up, evaluated after training or saved; newest checkpoint: step "
@@ -127,7 +117,7 @@ def test_a_run_cut_in_its_evaluation_after_training_resumes_at_its_budget(
     checkpoint = Checkpoint.latest("ckpt")
     assert checkpoint is not None and checkpoint.num_timesteps == 400
     # Resumed, it trains no further and plays the games; its monitor file holds the training episodes of the first part
-    assert run(monkeypatch, *go_on(line)) == 0
+    assert run_train(monkeypatch, *go_on(line)) == 0
     assert played == [400, 400]
     resumed = tmp_path / "logs" / "offon_dqn" / "CartPole-v1_2"
     with np.load(resumed / "final_evaluation.npz") as record:
@@ -151,11 +141,11 @@ def test_a_sigterm_in_the_last_rollout_stops_with_a_checkpoint_of_the_budget(
     command = [*RUN, "--checkpoint-freq", "300", "--checkpoint-dir", "ckpt", *SHORT, "final_eval_episodes:2"]
     with monkeypatch.context() as patch:
         sigterm_in_training_at(patch, 400)
-        assert run(patch, *command) == TERMINATED
+        assert run_train(patch, *command) == TERMINATED
     line = last_line(capsys)
     assert line.startswith(f"{PROG}: stopped (SIGTERM) at step 400 of 400; newest checkpoint: step 400 in ckpt; to go on")
     assert played == []  # stopped before the games
-    assert run(monkeypatch, *go_on(line)) == 0 and played == [0]
+    assert run_train(monkeypatch, *go_on(line)) == 0 and played == [0]
     assert not (tmp_path / "ckpt").exists()
 
 
